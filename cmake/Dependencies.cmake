@@ -1,0 +1,17 @@
+# Every dependency comes from Debian 12 packages (see scripts/install-deps.sh).
+find_package(PkgConfig REQUIRED)
+find_package(Threads REQUIRED)
+find_package(fmt REQUIRED)
+
+# Debian's OpenImageIO and OpenColorIO CMake configs carry broken include
+# paths; their pkg-config files give clean imported targets.
+pkg_check_modules(OIIO REQUIRED IMPORTED_TARGET OpenImageIO)
+pkg_check_modules(OCIO REQUIRED IMPORTED_TARGET OpenColorIO)
+
+if(DN_BUILD_TESTS)
+  find_package(doctest REQUIRED)
+endif()
+
+if(DN_WITH_TORCH)
+  find_package(Torch REQUIRED)
+endif()
