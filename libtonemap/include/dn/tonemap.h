@@ -1,0 +1,40 @@
+// Tonemapping curves used by the denoiser and the metrics, each with its exact
+// inverse. The model works in the log (or gamma) range; metrics use Reinhard.
+#pragma once
+
+#include <string>
+
+#include "dn/image.h"
+
+namespace dn::tonemap {
+
+constexpr float kHdrMax = 6.0f;        // radiance is clamped to [0, 6] (paper)
+constexpr float kGammaScale = 0.47f;   // gamma curve: A * v^g
+constexpr float kGammaExponent = 1.0f / 2.4f;
+constexpr float kLogScale = 0.51f;     // log curve: A * log(1 + v)
+
+enum class Curve { Linear, Gamma, Log, Reinhard, Srgb };
+
+float gamma(float v);
+float gammaInverse(float t);
+float log(float v);
+float logInverse(float t);
+float reinhard(float v);
+float reinhardInverse(float t);
+float srgbEncode(float linear);
+float srgbDecode(float encoded);
+
+float apply(Curve curve, float v);
+float applyInverse(Curve curve, float t);
+
+// In-place, over every channel of the image. Negative inputs map through the
+// curves as 0 (all curves are defined on radiance >= 0).
+void apply(Curve curve, Image& image);
+void applyInverse(Curve curve, Image& image);
+void clamp(Image& image, float lo, float hi);
+
+// "gamma", "log", "reinhard", "srgb", "linear"; throws std::invalid_argument.
+Curve curveFromName(const std::string& name);
+const char* curveName(Curve curve);
+
+}  // namespace dn::tonemap
