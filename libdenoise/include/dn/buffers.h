@@ -1,0 +1,41 @@
+// The canonical set of per-frame render buffers, independent of how a renderer
+// names its channels. Buffer I/O (dn/buffer_io.h) fills it from files.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "dn/image.h"
+
+namespace dn {
+
+// One canonical buffer: its name, channel count and how renderers name it.
+struct BufferSpec {
+  std::string name;                  // canonical name, e.g. "albedo"
+  int channels;                      // 3 for colours and normals, 1 for scalars
+  std::vector<std::string> layers;   // layer names tried in order, e.g. "Denoising Albedo", "albedo"
+  std::string description;
+};
+
+// All canonical buffers, in a fixed order (the order model inputs use):
+//   color, albedo, normal, depth,
+//   diffuse_direct, diffuse_indirect, diffuse_color,
+//   glossy_direct, glossy_indirect, glossy_color,
+//   transmission_direct, transmission_indirect, transmission_color,
+//   emission, environment, roughness, metallic, transmission, color_variance
+const std::vector<BufferSpec>& canonicalBuffers();
+const BufferSpec* findBufferSpec(const std::string& name);  // nullptr if unknown
+
+// One frame's buffers by canonical name. Every image has the same width/height.
+struct FrameBuffers {
+  int width = 0;
+  int height = 0;
+  std::map<std::string, Image> buffers;
+
+  bool has(const std::string& name) const { return buffers.count(name) != 0; }
+  const Image& get(const std::string& name) const;  // throws std::out_of_range naming the buffer
+  std::vector<std::string> names() const;
+};
+
+}  // namespace dn
