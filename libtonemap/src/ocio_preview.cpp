@@ -56,7 +56,8 @@ void ocioPreview(Image& rgb, const PreviewOptions& options) {
   try {
     auto config = activeConfig();
     std::string display = options.display.empty() ? config->getDefaultDisplay() : options.display;
-    std::string view = options.view.empty() ? config->getDefaultView(display.c_str()) : options.view;
+    std::string view =
+        options.view.empty() ? config->getDefaultView(display.c_str()) : options.view;
     auto transform = OCIO::DisplayViewTransform::Create();
     transform->setSrc(OCIO::ROLE_SCENE_LINEAR);
     transform->setDisplay(display.c_str());

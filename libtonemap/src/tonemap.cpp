@@ -11,7 +11,9 @@ float nonNegative(float v) { return v > 0.0f ? v : 0.0f; }  // also maps NaN to 
 }  // namespace
 
 float gamma(float v) { return kGammaScale * std::pow(nonNegative(v), kGammaExponent); }
-float gammaInverse(float t) { return std::pow(nonNegative(t) / kGammaScale, 1.0f / kGammaExponent); }
+float gammaInverse(float t) {
+  return std::pow(nonNegative(t) / kGammaScale, 1.0f / kGammaExponent);
+}
 float log(float v) { return kLogScale * std::log1p(nonNegative(v)); }
 float logInverse(float t) { return std::expm1(nonNegative(t) / kLogScale); }
 float reinhard(float v) {
@@ -34,22 +36,32 @@ float srgbDecode(float e) {
 
 float apply(Curve curve, float v) {
   switch (curve) {
-    case Curve::Linear: return v;
-    case Curve::Gamma: return gamma(v);
-    case Curve::Log: return log(v);
-    case Curve::Reinhard: return reinhard(v);
-    case Curve::Srgb: return srgbEncode(v);
+    case Curve::Linear:
+      return v;
+    case Curve::Gamma:
+      return gamma(v);
+    case Curve::Log:
+      return log(v);
+    case Curve::Reinhard:
+      return reinhard(v);
+    case Curve::Srgb:
+      return srgbEncode(v);
   }
   return v;
 }
 
 float applyInverse(Curve curve, float t) {
   switch (curve) {
-    case Curve::Linear: return t;
-    case Curve::Gamma: return gammaInverse(t);
-    case Curve::Log: return logInverse(t);
-    case Curve::Reinhard: return reinhardInverse(t);
-    case Curve::Srgb: return srgbDecode(t);
+    case Curve::Linear:
+      return t;
+    case Curve::Gamma:
+      return gammaInverse(t);
+    case Curve::Log:
+      return logInverse(t);
+    case Curve::Reinhard:
+      return reinhardInverse(t);
+    case Curve::Srgb:
+      return srgbDecode(t);
   }
   return t;
 }
@@ -78,11 +90,16 @@ Curve curveFromName(const std::string& name) {
 
 const char* curveName(Curve curve) {
   switch (curve) {
-    case Curve::Linear: return "linear";
-    case Curve::Gamma: return "gamma";
-    case Curve::Log: return "log";
-    case Curve::Reinhard: return "reinhard";
-    case Curve::Srgb: return "srgb";
+    case Curve::Linear:
+      return "linear";
+    case Curve::Gamma:
+      return "gamma";
+    case Curve::Log:
+      return "log";
+    case Curve::Reinhard:
+      return "reinhard";
+    case Curve::Srgb:
+      return "srgb";
   }
   return "?";
 }

@@ -34,6 +34,9 @@ std::pair<std::string, std::vector<std::string>> parseChannelOverride(const std:
 // One frame from a single (usually multilayer) image file. "color" is required.
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options = {});
 
+// Every channel name of a file (all parts), for listings and layer lookups.
+std::vector<std::string> channelNames(const std::string& path);
+
 // One frame from one file per buffer, as oidnDenoise takes them (EXR, PFM, HDR, ...):
 // {"color": "beauty.pfm", "albedo": "alb.pfm", "normal": "nrm.pfm"}.
 FrameBuffers readSeparateFiles(const std::map<std::string, std::string>& fileForBuffer);
@@ -47,9 +50,9 @@ Image readImage(const std::string& path, int channels = 3,
 std::size_t countAndZeroNonFinite(Image& image);
 
 struct WriteOptions {
-  bool half = true;                   // half or float pixels for the result channels
-  std::string layer = "Denoised";     // result layer name: "<layer>.R/G/B"
-  bool rgbOnly = false;               // plain RGB file, no other layers or metadata
+  bool half = true;                          // half or float pixels for the result channels
+  std::string layer = "Denoised";            // result layer name: "<layer>.R/G/B"
+  bool rgbOnly = false;                      // plain RGB file, no other layers or metadata
   std::map<std::string, Image> extraLayers;  // more named layers, e.g. "uncertainty"
 };
 

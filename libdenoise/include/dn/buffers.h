@@ -12,9 +12,9 @@ namespace dn {
 
 // One canonical buffer: its name, channel count and how renderers name it.
 struct BufferSpec {
-  std::string name;                  // canonical name, e.g. "albedo"
-  int channels;                      // 3 for colours and normals, 1 for scalars
-  std::vector<std::string> layers;   // layer names tried in order, e.g. "Denoising Albedo", "albedo"
+  std::string name;                 // canonical name, e.g. "albedo"
+  int channels;                     // 3 for colours and normals, 1 for scalars
+  std::vector<std::string> layers;  // layer names tried in order, e.g. "Denoising Albedo", "albedo"
   std::string description;
 };
 
@@ -32,10 +32,17 @@ struct FrameBuffers {
   int width = 0;
   int height = 0;
   std::map<std::string, Image> buffers;
+  // Where each buffer came from: the file's channel names, e.g.
+  // {"ViewLayer.Combined.R", ...}; empty for synthesized buffers.
+  std::map<std::string, std::vector<std::string>> sourceChannels;
 
   bool has(const std::string& name) const { return buffers.count(name) != 0; }
   const Image& get(const std::string& name) const;  // throws std::out_of_range naming the buffer
   std::vector<std::string> names() const;
 };
+
+// The layer prefix the colour came from ("ViewLayer." for Blender, "" for plain
+// RGB), so results can be written as a sibling pass: prefix + "Denoised".
+std::string layerPrefixOf(const FrameBuffers& frame, const std::string& buffer = "color");
 
 }  // namespace dn

@@ -15,8 +15,7 @@ struct Image {
 
   Image() = default;
   Image(int w, int h, int c, float fill = 0.0f)
-      : width(w), height(h), channels(c),
-        pixels(static_cast<std::size_t>(w) * h * c, fill) {}
+      : width(w), height(h), channels(c), pixels(static_cast<std::size_t>(w) * h * c, fill) {}
 
   std::size_t pixelCount() const { return static_cast<std::size_t>(width) * height; }
   std::size_t size() const { return pixels.size(); }

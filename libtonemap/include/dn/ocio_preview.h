@@ -8,8 +8,8 @@
 namespace dn::tonemap {
 
 struct PreviewOptions {
-  std::string display;  // empty: the config's default display
-  std::string view;     // empty: the display's default view
+  std::string display;    // empty: the config's default display
+  std::string view;       // empty: the display's default view
   float exposure = 0.0f;  // stops, applied in scene-linear before the transform
 };
 

@@ -8,10 +8,10 @@
 
 namespace dn::tonemap {
 
-constexpr float kHdrMax = 6.0f;        // radiance is clamped to [0, 6] (paper)
-constexpr float kGammaScale = 0.47f;   // gamma curve: A * v^g
+constexpr float kHdrMax = 6.0f;       // radiance is clamped to [0, 6] (paper)
+constexpr float kGammaScale = 0.47f;  // gamma curve: A * v^g
 constexpr float kGammaExponent = 1.0f / 2.4f;
-constexpr float kLogScale = 0.51f;     // log curve: A * log(1 + v)
+constexpr float kLogScale = 0.51f;  // log curve: A * log(1 + v)
 
 enum class Curve { Linear, Gamma, Log, Reinhard, Srgb };
 

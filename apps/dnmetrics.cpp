@@ -1,0 +1,309 @@
+// dnmetrics: compare renders against a reference.
+//   dnmetrics REF TEST...          one reference, several results
+//   dnmetrics REFDIR TESTDIR       same-named files of two folders, with a summary
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
+
+#include "common/cli.h"
+#include "dn/buffer_io.h"
+#include "dn/flip.h"
+#include "dn/metrics.h"
+#include "dn/parallel.h"
+
+namespace fs = std::filesystem;
+using namespace dn;
+
+namespace {
+
+const char* kUsage = R"(usage: dnmetrics [options] REF TEST...
+       dnmetrics [options] REFDIR TESTDIR
+
+Compares each TEST image with REF (or the same-named files of two folders).
+L1, MSE and SMAPE use radiance clamped to [0, 6]; relMSE linear radiance;
+PSNR and SSIM Reinhard-tonemapped images; flip is LDR-FLIP of the Reinhard
+images encoded as sRGB; hdrflip is HDR-FLIP of the linear images.
+
+options:
+  --metrics LIST         comma-separated subset of: l1,mse,relmse,psnr,ssim,smape,flip,hdrflip
+                         (default: all)
+  --format table|csv|json  output format (default: table)
+  --heatmap FILE.png     write the FLIP error map in colour (one TEST only)
+  --maxerror METRIC=V    exit with code 2 if any result is worse than V (repeatable;
+                         for psnr and ssim, worse means lower)
+  --ref-channels LIST    channel names to read from REF, e.g. R,G,B
+  --test-channels LIST   channel names to read from each TEST
+                         (default: the colour of the file, or its Denoised layer if present)
+  --nonfinite error|zero NaN/Inf pixels: fail (default) or count them as 0 and report
+  --threads N            worker threads (default: all cores)
+  -h, --help             this text
+exit codes: 0 ok, 1 bad input or arguments, 2 a --maxerror check failed
+)";
+
+struct Options {
+  std::vector<std::string> inputs;
+  std::vector<std::string> metrics = metrics::metricNames();
+  std::string format = "table";
+  std::string heatmap;
+  std::vector<std::pair<std::string, double>> maxErrors;
+  std::vector<std::string> refChannels, testChannels;
+  bool zeroNonFinite = false;
+};
+
+Options parseArgs(int argc, char** argv) {
+  cli::Args args(argc, argv);
+  Options o;
+  while (!args.done()) {
+    if (args.flag("-h", "--help")) {
+      std::fputs(kUsage, stdout);
+      std::exit(cli::kExitOk);
+    } else if (args.flag("--metrics")) {
+      o.metrics = cli::splitList(args.value("--metrics"));
+      for (const auto& m : o.metrics)
+        if (!metrics::isMetricName(m))
+          throw cli::UsageError("--metrics: unknown metric '" + m + "'");
+    } else if (args.flag("--format")) {
+      o.format = args.value("--format");
+      if (o.format != "table" && o.format != "csv" && o.format != "json")
+        throw cli::UsageError("--format must be table, csv or json");
+    } else if (args.flag("--heatmap")) {
+      o.heatmap = args.value("--heatmap");
+    } else if (args.flag("--maxerror")) {
+      std::string spec = args.value("--maxerror");
+      auto eq = spec.find('=');
+      std::string name = spec.substr(0, eq);
+      if (eq == std::string::npos || !metrics::isMetricName(name))
+        throw cli::UsageError("--maxerror expects METRIC=VALUE with a known metric, got '" + spec +
+                              "'");
+      o.maxErrors.emplace_back(name, cli::Args::toDouble("--maxerror", spec.substr(eq + 1)));
+    } else if (args.flag("--ref-channels")) {
+      o.refChannels = cli::splitList(args.value("--ref-channels"));
+    } else if (args.flag("--test-channels")) {
+      o.testChannels = cli::splitList(args.value("--test-channels"));
+    } else if (args.flag("--nonfinite")) {
+      std::string v = args.value("--nonfinite");
+      if (v != "error" && v != "zero") throw cli::UsageError("--nonfinite must be error or zero");
+      o.zeroNonFinite = v == "zero";
+    } else if (args.flag("--threads")) {
+      kernelThreadCount() = args.intValue("--threads");
+    } else if (args.peek().size() > 1 && args.peek()[0] == '-') {
+      throw cli::UsageError("unknown option '" + args.peek() + "' (see --help)");
+    } else {
+      o.inputs.push_back(args.positional());
+    }
+  }
+  if (o.inputs.size() < 2)
+    throw cli::UsageError("need a reference and at least one test image (see --help)");
+  // Every metric named by --maxerror must be computed.
+  for (const auto& [name, v] : o.maxErrors)
+    if (std::find(o.metrics.begin(), o.metrics.end(), name) == o.metrics.end())
+      o.metrics.push_back(name);
+  if (!o.heatmap.empty() &&
+      std::find(o.metrics.begin(), o.metrics.end(), "flip") == o.metrics.end() &&
+      std::find(o.metrics.begin(), o.metrics.end(), "hdrflip") == o.metrics.end())
+    o.metrics.push_back("flip");
+  return o;
+}
+
+// A result file's denoised layer if it has one, else its colour.
+Image loadColor(const std::string& path, const std::vector<std::string>& channels,
+                bool preferDenoised) {
+  if (!channels.empty()) return readImage(path, 0, channels);
+  if (preferDenoised) {
+    auto names = channelNames(path);
+    for (const auto& n : names) {
+      if (n.size() < 10 || n.compare(n.size() - 10, 10, "Denoised.R") != 0) continue;
+      std::string prefix = n.substr(0, n.size() - 1);
+      if (std::count(names.begin(), names.end(), prefix + "G") &&
+          std::count(names.begin(), names.end(), prefix + "B"))
+        return readImage(path, 0, {prefix + "R", prefix + "G", prefix + "B"});
+    }
+  }
+  return readImage(path, 3);
+}
+
+Image loadChecked(const std::string& path, const std::vector<std::string>& channels,
+                  bool preferDenoised, bool zeroNonFinite, std::size_t& nonFinite) {
+  Image image = loadColor(path, channels, preferDenoised);
+  nonFinite = countAndZeroNonFinite(image);
+  if (nonFinite > 0 && !zeroNonFinite)
+    throw IoError(fmt::format("{}: {} NaN/Inf values (use --nonfinite zero to count them as 0)",
+                              path, nonFinite));
+  if (nonFinite > 0)
+    fmt::print(stderr, "dnmetrics: {}: {} NaN/Inf values counted as 0\n", path, nonFinite);
+  return image;
+}
+
+struct Row {
+  std::string name;
+  std::map<std::string, double> values;
+};
+
+bool isImageFile(const fs::path& p) {
+  static const std::set<std::string> exts = {".exr", ".pfm",  ".hdr", ".png",
+                                             ".tif", ".tiff", ".jpg", ".jpeg"};
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+  return fs::is_regular_file(p) && exts.count(ext);
+}
+
+// (reference, test, display name) triples for both modes.
+std::vector<std::array<std::string, 3>> pairUp(const Options& o) {
+  std::vector<std::array<std::string, 3>> pairs;
+  if (!fs::is_directory(o.inputs[0])) {
+    for (std::size_t i = 1; i < o.inputs.size(); ++i) {
+      if (fs::is_directory(o.inputs[i]))
+        throw IoError(o.inputs[i] + ": is a folder but REF is a file");
+      pairs.push_back({o.inputs[0], o.inputs[i], o.inputs[i]});
+    }
+    return pairs;
+  }
+  if (o.inputs.size() != 2 || !fs::is_directory(o.inputs[1]))
+    throw cli::UsageError("folder mode takes exactly REFDIR TESTDIR");
+  std::vector<std::string> missing;
+  for (const auto& entry : fs::directory_iterator(o.inputs[0])) {
+    if (!isImageFile(entry.path())) continue;
+    fs::path test = fs::path(o.inputs[1]) / entry.path().filename();
+    if (!fs::exists(test))
+      missing.push_back(entry.path().filename().string());
+    else
+      pairs.push_back({entry.path().string(), test.string(), entry.path().filename().string()});
+  }
+  if (!missing.empty())
+    throw IoError(o.inputs[1] + ": missing " + std::to_string(missing.size()) + " file(s) of " +
+                  o.inputs[0] + ", e.g. " + missing.front());
+  if (pairs.empty()) throw IoError(o.inputs[0] + ": no images to compare");
+  std::sort(pairs.begin(), pairs.end());
+  return pairs;
+}
+
+void writeHeatmap(const std::string& path, const metrics::Comparison& c) {
+  const Image& map = c.flipMap.empty() ? c.hdrFlipMap : c.flipMap;
+  Image heat = flip::magmaHeatmap(map);
+  writeImage(path, heat, false);
+}
+
+std::pair<double, double> meanAndStd(const std::vector<Row>& rows, const std::string& metric) {
+  double sum = 0, sq = 0;
+  for (const auto& r : rows) sum += r.values.at(metric);
+  double mean = sum / rows.size();
+  for (const auto& r : rows) sq += (r.values.at(metric) - mean) * (r.values.at(metric) - mean);
+  return {mean, rows.size() > 1 ? std::sqrt(sq / (rows.size() - 1)) : 0.0};
+}
+
+std::string jsonNumber(double v) { return std::isfinite(v) ? fmt::format("{:.6g}", v) : "null"; }
+
+std::string jsonString(const std::string& s) {
+  std::string out = "\"";
+  for (char ch : s) {
+    if (ch == '"' || ch == '\\') out += '\\';
+    out += ch;
+  }
+  return out + "\"";
+}
+
+void print(const Options& o, const std::vector<Row>& rows) {
+  const bool summary = rows.size() > 1;
+  if (o.format == "json") {
+    auto object = [&](const std::map<std::string, double>& values) {
+      std::string s;
+      for (const auto& m : o.metrics)
+        s += fmt::format("{}\"{}\": {}", s.empty() ? "" : ", ", m, jsonNumber(values.at(m)));
+      return s;
+    };
+    fmt::print("{{\n  \"reference\": {},\n  \"results\": [\n", jsonString(o.inputs[0]));
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      fmt::print("    {{\"file\": {}, {}}}{}\n", jsonString(rows[i].name), object(rows[i].values),
+                 i + 1 < rows.size() ? "," : "");
+    std::map<std::string, double> mean, spread;
+    for (const auto& m : o.metrics) std::tie(mean[m], spread[m]) = meanAndStd(rows, m);
+    fmt::print("  ],\n  \"mean\": {{{}}},\n  \"std\": {{{}}}\n}}\n", object(mean), object(spread));
+  } else if (o.format == "csv") {
+    fmt::print("file");
+    for (const auto& m : o.metrics) fmt::print(",{}", m);
+    fmt::print("\n");
+    for (const auto& r : rows) {
+      fmt::print("{}", r.name);
+      for (const auto& m : o.metrics) fmt::print(",{:.6g}", r.values.at(m));
+      fmt::print("\n");
+    }
+    if (summary) {
+      fmt::print("mean");
+      for (const auto& m : o.metrics) fmt::print(",{:.6g}", meanAndStd(rows, m).first);
+      fmt::print("\n");
+    }
+  } else {
+    std::size_t width = 4;
+    for (const auto& r : rows) width = std::max(width, r.name.size());
+    fmt::print("reference: {}\n{:<{}}", o.inputs[0], "file", width);
+    for (const auto& m : o.metrics) fmt::print("  {:>10}", m);
+    fmt::print("\n");
+    for (const auto& r : rows) {
+      fmt::print("{:<{}}", r.name, width);
+      for (const auto& m : o.metrics) fmt::print("  {:>10.5g}", r.values.at(m));
+      fmt::print("\n");
+    }
+    if (summary) {
+      fmt::print("{:<{}}", "mean", width);
+      for (const auto& m : o.metrics) fmt::print("  {:>10.5g}", meanAndStd(rows, m).first);
+      fmt::print("\n{:<{}}", "std", width);
+      for (const auto& m : o.metrics) fmt::print("  {:>10.5g}", meanAndStd(rows, m).second);
+      fmt::print("\n");
+    }
+  }
+}
+
+int run(const Options& o) {
+  auto pairs = pairUp(o);
+  if (!o.heatmap.empty() && pairs.size() != 1)
+    throw cli::UsageError("--heatmap needs exactly one TEST");
+  std::vector<Row> rows;
+  std::string loadedRef;  // a shared reference is read once
+  Image ref;
+  for (const auto& [refPath, testPath, name] : pairs) {
+    std::size_t nonFinite = 0;
+    if (refPath != loadedRef) {
+      ref = loadChecked(refPath, o.refChannels, false, o.zeroNonFinite, nonFinite);
+      loadedRef = refPath;
+    }
+    Image test = loadChecked(testPath, o.testChannels, true, o.zeroNonFinite, nonFinite);
+    if (test.width != ref.width || test.height != ref.height)
+      throw IoError(fmt::format("{}: size {}x{} does not match reference {} ({}x{})", testPath,
+                                test.width, test.height, refPath, ref.width, ref.height));
+    auto comparison = metrics::compare(ref, test, o.metrics);
+    if (!o.heatmap.empty()) writeHeatmap(o.heatmap, comparison);
+    rows.push_back({name, comparison.values});
+  }
+  print(o, rows);
+
+  int status = cli::kExitOk;
+  for (const auto& [metric, limit] : o.maxErrors)
+    for (const auto& r : rows) {
+      double v = r.values.at(metric);
+      bool worse = metrics::higherIsBetter(metric) ? !(v >= limit) : !(v <= limit);
+      if (worse) {
+        fmt::print(stderr, "dnmetrics: {}: {} = {:.6g} is worse than the limit {:.6g}\n", r.name,
+                   metric, v, limit);
+        status = cli::kExitThreshold;
+      }
+    }
+  return status;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(parseArgs(argc, argv));
+  } catch (const cli::UsageError& e) {
+    fmt::print(stderr, "dnmetrics: {}\n", e.what());
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "dnmetrics: {}\n", e.what());
+  }
+  return cli::kExitError;
+}

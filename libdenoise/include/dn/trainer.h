@@ -1,0 +1,83 @@
+// One gradient step at a time for a ConditionalDenoiser (a base prior on its own,
+// or a frozen base under a Control Module): epsilon- or v-prediction MSE, AdamW
+// with step-wise learning-rate halving, an EMA of the trainable weights, and
+// atomic checkpoints that resume exactly. An app feeds it TrainBatch values.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "dn/model_file.h"
+#include "dn/prior.h"
+#include "dn/schedule.h"
+
+namespace dn {
+
+// All images tonemapped to [0, 1]; height and width may be anything.
+struct TrainBatch {
+  torch::Tensor noisy;   // (B,3,H,W) the noisy render: the conditioning image
+  torch::Tensor aux;     // (B,C,H,W) auxiliary buffers, or undefined when unused
+  torch::Tensor target;  // (B,3,H,W) the clean image
+};
+
+struct TrainerOptions {
+  double learning_rate = 2e-4;
+  int64_t halve_every = 0;  // halve the learning rate every this many steps (0: never)
+  double weight_decay = 0.0;
+  double ema_decay = 0.999;
+  double max_grad_norm = 1.0;  // 0 disables clipping
+  uint64_t seed = 0;
+};
+
+struct StepStats {
+  int64_t step = 0;  // steps completed, including this one
+  double loss = 0.0;
+  double learning_rate = 0.0;
+};
+
+// The diffusion MSE on one batch: uniform timesteps, fresh noise, target of the
+// model's prediction type, all drawn from `generator`.
+torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& schedule,
+                            Prediction prediction, const TrainBatch& batch,
+                            torch::Generator& generator);
+
+class Trainer {
+ public:
+  // `info` describes `model` (it is written into checkpoints and model files).
+  Trainer(std::shared_ptr<ConditionalDenoiser> model, ModelInfo info, TrainerOptions options);
+
+  StepStats step(const TrainBatch& batch);
+  // Loss without a gradient step, with noise drawn from `seed` (comparable across calls).
+  double evaluate(const TrainBatch& batch, uint64_t seed);
+
+  int64_t stepCount() const { return step_; }
+  double currentLearningRate() const;
+  const ModelInfo& info() const { return info_; }
+  std::shared_ptr<ConditionalDenoiser> model() const { return model_; }
+
+  // Everything needed to continue exactly: weights, optimizer, EMA, step, RNG.
+  void saveCheckpoint(const std::string& path);
+  void loadCheckpoint(const std::string& path);  // throws ModelError
+  // A model file with the EMA weights (what inference should use).
+  void saveEmaModel(const std::string& path);
+
+ private:
+  void updateEma();
+  void swapEma();
+
+  std::shared_ptr<ConditionalDenoiser> model_;
+  ModelInfo info_;
+  TrainerOptions options_;
+  NoiseSchedule schedule_;
+  std::vector<torch::Tensor> trainable_;
+  std::vector<torch::Tensor> ema_;
+  std::unique_ptr<torch::optim::AdamW> optimizer_;
+  torch::Generator generator_;
+  int64_t step_ = 0;
+};
+
+}  // namespace dn
