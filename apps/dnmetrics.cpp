@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -193,10 +194,17 @@ std::pair<double, double> meanAndStd(const std::vector<Row>& rows, const std::st
   for (const auto& r : rows) sum += r.values.at(metric);
   double mean = sum / rows.size();
   for (const auto& r : rows) sq += (r.values.at(metric) - mean) * (r.values.at(metric) - mean);
+  if (!std::isfinite(mean)) return {mean, NAN};
   return {mean, rows.size() > 1 ? std::sqrt(sq / (rows.size() - 1)) : 0.0};
 }
 
-std::string jsonNumber(double v) { return std::isfinite(v) ? fmt::format("{:.6g}", v) : "null"; }
+std::string jsonNumber(double v) { return std::isfinite(v) ? fmt::format("{:.8g}", v) : "null"; }
+
+// Table cells: 5 significant digits; "inf" for a perfect PSNR, "n/a" for undefined spreads.
+std::string cell(double v) {
+  if (std::isnan(v)) return "n/a";
+  return std::isinf(v) ? "inf" : fmt::format("{:.5g}", v);
+}
 
 std::string jsonString(const std::string& s) {
   std::string out = "\"";
@@ -229,12 +237,12 @@ void print(const Options& o, const std::vector<Row>& rows) {
     fmt::print("\n");
     for (const auto& r : rows) {
       fmt::print("{}", r.name);
-      for (const auto& m : o.metrics) fmt::print(",{:.6g}", r.values.at(m));
+      for (const auto& m : o.metrics) fmt::print(",{:.8g}", r.values.at(m));
       fmt::print("\n");
     }
     if (summary) {
       fmt::print("mean");
-      for (const auto& m : o.metrics) fmt::print(",{:.6g}", meanAndStd(rows, m).first);
+      for (const auto& m : o.metrics) fmt::print(",{:.8g}", meanAndStd(rows, m).first);
       fmt::print("\n");
     }
   } else {
@@ -245,14 +253,14 @@ void print(const Options& o, const std::vector<Row>& rows) {
     fmt::print("\n");
     for (const auto& r : rows) {
       fmt::print("{:<{}}", r.name, width);
-      for (const auto& m : o.metrics) fmt::print("  {:>10.5g}", r.values.at(m));
+      for (const auto& m : o.metrics) fmt::print("  {:>10}", cell(r.values.at(m)));
       fmt::print("\n");
     }
     if (summary) {
       fmt::print("{:<{}}", "mean", width);
-      for (const auto& m : o.metrics) fmt::print("  {:>10.5g}", meanAndStd(rows, m).first);
+      for (const auto& m : o.metrics) fmt::print("  {:>10}", cell(meanAndStd(rows, m).first));
       fmt::print("\n{:<{}}", "std", width);
-      for (const auto& m : o.metrics) fmt::print("  {:>10.5g}", meanAndStd(rows, m).second);
+      for (const auto& m : o.metrics) fmt::print("  {:>10}", cell(meanAndStd(rows, m).second));
       fmt::print("\n");
     }
   }

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Installs every dependency from Debian 12 packages and PyPI, then configures
+# and builds the project into ./build (Release). Safe to run again.
+#   DN_SKIP_BLENDER=1  skip Blender (only the scene generator needs it)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+sudo_if_needed() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+
+packages=(build-essential cmake ninja-build pkg-config git
+          libtorch-dev libopenimageio-dev openimageio-tools libopenexr-dev
+          libopencolorio-dev libfmt-dev doctest-dev python3 python3-pip)
+[ "${DN_SKIP_BLENDER:-0}" = 1 ] || packages+=(blender)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "install.sh: installing ${missing[*]}" >&2
+  sudo_if_needed apt-get update -qq
+  sudo_if_needed env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+# Python tools used only to measure against (reference FLIP, OIDN, SSIM checks).
+pip_packages=(numpy flip-evaluator pyoidn scikit-image OpenEXR)
+if ! python3 -c "import numpy, flip_evaluator, pyoidn, skimage, OpenEXR" 2>/dev/null; then
+  python3 -m pip install -q "${pip_packages[@]}" 2>/dev/null ||
+    python3 -m pip install -q --break-system-packages "${pip_packages[@]}"
+fi
+
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build build -j"$(nproc)"

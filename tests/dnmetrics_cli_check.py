@@ -1,0 +1,116 @@
+#!/usr/bin/env python3
+"""dnmetrics as a user meets it: outputs, exit codes and every bad-input case
+(one line on stderr naming the file, non-zero exit, no output file)."""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(__file__))
+from exr_numpy import write_rgb  # noqa: E402
+
+failures = 0
+checks = 0
+
+
+def check(label, ok, detail=""):
+    global failures, checks
+    checks += 1
+    failures += not ok
+    print(f"{'ok  ' if ok else 'FAIL'} {label}{'' if ok else ': ' + detail}")
+
+
+def run(cmd):
+    return subprocess.run(cmd, capture_output=True, text=True)
+
+
+def expect_error(tool, label, args, must_name, code=1, no_file=None):
+    out = run([tool] + args)
+    lines = out.stderr.strip().splitlines()
+    check(f"{label}: exit {code}", out.returncode == code, f"exit {out.returncode}, stderr {out.stderr!r}")
+    check(f"{label}: one line naming {os.path.basename(must_name)}",
+          len(lines) == 1 and must_name in lines[0], repr(out.stderr))
+    if no_file:
+        check(f"{label}: no output file", not os.path.exists(no_file), no_file)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--dnmetrics", required=True)
+    ap.add_argument("--work-dir", required=True)
+    args = ap.parse_args()
+    tool, w = args.dnmetrics, args.work_dir
+    shutil.rmtree(w, ignore_errors=True)
+    os.makedirs(os.path.join(w, "ref"))
+    os.makedirs(os.path.join(w, "test"))
+    p = lambda *n: os.path.join(w, *n)  # noqa: E731
+
+    rng = np.random.default_rng(3)
+    ref = (rng.random((40, 50, 3)) * 2).astype(np.float32)
+    noisy = (ref * rng.gamma(4.0, 0.25, ref.shape)).astype(np.float32)
+    write_rgb(p("ref.exr"), ref)
+    write_rgb(p("noisy.exr"), noisy)
+    write_rgb(p("same.exr"), ref)
+    write_rgb(p("small.exr"), ref[:20])
+    bad = noisy.copy()
+    bad[3, 4, 0], bad[5, 6, 1] = np.nan, np.inf
+    write_rgb(p("nan.exr"), bad)
+    with open(p("text.exr"), "w") as f:
+        f.write("this is not an image\n")
+    data = open(p("noisy.exr"), "rb").read()
+    with open(p("cut.exr"), "wb") as f:
+        f.write(data[: len(data) // 2])
+    for name, img in (("a.exr", ref), ("b.exr", ref * 1.1)):
+        write_rgb(p("ref", name), ref)
+        write_rgb(p("test", name), img)
+
+    out = run([tool, "--format", "json", p("ref.exr"), p("noisy.exr"), p("same.exr")])
+    check("json: exit 0", out.returncode == 0, out.stderr)
+    doc = json.loads(out.stdout)
+    keys = {"l1", "mse", "relmse", "psnr", "ssim", "smape", "flip", "hdrflip"}
+    check("json: every metric per file and mean", keys <= set(doc["results"][0]) and keys <= set(doc["mean"]))
+    check("json: identical image scores 0 error", doc["results"][1]["l1"] == 0 and doc["results"][1]["flip"] == 0)
+    check("json: mean is the mean", abs(doc["mean"]["l1"] - doc["results"][0]["l1"] / 2) < 1e-6)
+
+    out = run([tool, "--format", "csv", "--metrics", "l1,psnr", p("ref.exr"), p("noisy.exr")])
+    rows = out.stdout.strip().splitlines()
+    check("csv: header and one row", rows[0] == "file,l1,psnr" and len(rows) == 2, out.stdout)
+
+    out = run([tool, p("ref"), p("test")])
+    check("folder mode: table with mean and std", out.returncode == 0 and "mean" in out.stdout and "std" in out.stdout,
+          out.stdout + out.stderr)
+
+    out = run([tool, "--heatmap", p("heat.png"), p("ref.exr"), p("noisy.exr")])
+    check("heatmap written", out.returncode == 0 and os.path.getsize(p("heat.png")) > 0, out.stderr)
+
+    out = run([tool, "--maxerror", "psnr=99", p("ref.exr"), p("noisy.exr")])
+    check("--maxerror psnr fails with exit 2", out.returncode == 2, out.stderr)
+    out = run([tool, "--maxerror", "l1=10", "--maxerror", "psnr=1", p("ref.exr"), p("noisy.exr")])
+    check("--maxerror passes with exit 0", out.returncode == 0, out.stderr)
+
+    expect_error(tool, "missing file", [p("ref.exr"), p("missing.exr")], p("missing.exr"))
+    expect_error(tool, "not an image", [p("ref.exr"), p("text.exr")], p("text.exr"))
+    expect_error(tool, "truncated EXR", [p("ref.exr"), p("cut.exr")], p("cut.exr"))
+    expect_error(tool, "absent channels", ["--test-channels", "diffuse.R,diffuse.G,diffuse.B",
+                                           p("ref.exr"), p("noisy.exr")], "diffuse.R")
+    expect_error(tool, "mismatched sizes", [p("ref.exr"), p("small.exr")], p("small.exr"))
+    expect_error(tool, "NaN/Inf pixels", ["--heatmap", p("nanheat.png"), p("ref.exr"), p("nan.exr")],
+                 p("nan.exr"), no_file=p("nanheat.png"))
+    expect_error(tool, "truncated EXR with heatmap", ["--heatmap", p("cutheat.png"), p("ref.exr"), p("cut.exr")],
+                 p("cut.exr"), no_file=p("cutheat.png"))
+    os.remove(p("test", "b.exr"))
+    expect_error(tool, "folder with a missing file", [p("ref"), p("test")], "b.exr")
+
+    out = run([tool, "--nonfinite", "zero", "--format", "json", p("ref.exr"), p("nan.exr")])
+    check("--nonfinite zero counts and reports", out.returncode == 0 and "2 NaN/Inf" in out.stderr, out.stderr)
+
+    print(f"{checks - failures} passed, {failures} failed")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
