@@ -24,7 +24,8 @@
 namespace {
 
 bool endsWith(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.size() >= suffix.size() &&
+         s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 // Indices of the R, G, B channels: plain "R","G","B", else a render layer's
@@ -57,8 +58,7 @@ dn::Image readRgb(const std::string& path) {
     throw std::runtime_error(path + ": " + input->geterror());
   dn::Image image(spec.width, spec.height, 3);
   for (std::size_t i = 0; i < image.pixelCount(); ++i)
-    for (int c = 0; c < 3; ++c)
-      image.pixels[i * 3 + c] = all[i * spec.nchannels + rgb[c]];
+    for (int c = 0; c < 3; ++c) image.pixels[i * 3 + c] = all[i * spec.nchannels + rgb[c]];
   return image;
 }
 
