@@ -15,11 +15,11 @@
 namespace dn {
 
 struct ControlConfig {
-  int64_t aux_channels = 0;     // auxiliary buffer channels (the paper uses 39)
+  int64_t aux_channels = 0;       // auxiliary buffer channels (the paper uses 39)
   int64_t radiance_channels = 3;  // the noisy radiance, also fed to the hint convs
-  int64_t hint_channels = 32;   // width of the input convolutions
-  int64_t hint_layers = 3;      // input convolutions before the zero conv (>= 1)
-  void validate() const;        // throws std::invalid_argument
+  int64_t hint_channels = 32;     // width of the input convolutions
+  int64_t hint_layers = 3;        // input convolutions before the zero conv (>= 1)
+  void validate() const;          // throws std::invalid_argument
 };
 
 class ControlModule : public torch::nn::Module {

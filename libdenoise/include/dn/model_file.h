@@ -58,7 +58,8 @@ struct LoadedModel {
 };
 
 // Atomic: writes a temporary file next to `path`, then renames it.
-void saveModelFile(const std::string& path, const ModelInfo& info, const ConditionalDenoiser& model);
+void saveModelFile(const std::string& path, const ModelInfo& info,
+                   const ConditionalDenoiser& model);
 LoadedModel loadModelFile(const std::string& path);
 
 // The container under model files and training checkpoints: `kind` tags what it

@@ -63,8 +63,8 @@ torch::Tensor forwardDiffuse(const torch::Tensor& x0, const torch::Tensor& noise
 
 // Conversions between parameterisations at a given alpha_bar (broadcastable):
 //   eps: z = a x0 + s eps;  v = a eps - s x0;  with a = sqrt(alpha_bar), s = sqrt(1 - alpha_bar).
-torch::Tensor x0FromPrediction(Prediction kind, const torch::Tensor& output, const torch::Tensor& z_t,
-                               const torch::Tensor& alpha_bar);
+torch::Tensor x0FromPrediction(Prediction kind, const torch::Tensor& output,
+                               const torch::Tensor& z_t, const torch::Tensor& alpha_bar);
 torch::Tensor epsFromPrediction(Prediction kind, const torch::Tensor& output,
                                 const torch::Tensor& z_t, const torch::Tensor& alpha_bar);
 // The training target of a model of type `kind` for a sample built from (x0, eps).

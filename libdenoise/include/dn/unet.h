@@ -21,8 +21,8 @@ struct UNetConfig {
   int64_t out_channels = 3;
   int64_t base_channels = 32;
   std::vector<int64_t> channel_mults = {1, 2, 4};  // one level per entry
-  int64_t res_blocks = 2;                         // per encoder level (decoder: one more)
-  std::vector<int64_t> attention_levels = {2};    // levels with self-attention
+  int64_t res_blocks = 2;                          // per encoder level (decoder: one more)
+  std::vector<int64_t> attention_levels = {2};     // levels with self-attention
   bool middle_attention = true;
   int64_t head_channels = 32;
   int64_t norm_groups = 8;
@@ -38,8 +38,8 @@ struct UNetConfig {
 class UNetEncoder : public PriorEncoder {
  public:
   explicit UNetEncoder(const UNetConfig& config);
-  EncoderFeatures encode(const torch::Tensor& z_t, const torch::Tensor& t, const torch::Tensor& cond,
-                         const torch::Tensor& hint) override;
+  EncoderFeatures encode(const torch::Tensor& z_t, const torch::Tensor& t,
+                         const torch::Tensor& cond, const torch::Tensor& hint) override;
   std::vector<int64_t> skipChannels() const override { return skip_channels_; }
   int64_t middleChannels() const override;
   int64_t firstFeatureChannels() const override { return config_.base_channels; }

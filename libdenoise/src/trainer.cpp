@@ -1,0 +1,152 @@
+#include "dn/trainer.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+
+#include <cmath>
+
+#include "dn/sampler.h"
+
+namespace dn {
+namespace {
+
+void checkBatch(const TrainBatch& batch) {
+  TORCH_CHECK(batch.noisy.defined() && batch.target.defined(), "batch needs noisy and target");
+  TORCH_CHECK(batch.noisy.dim() == 4 && batch.noisy.sizes() == batch.target.sizes(),
+              "noisy and target must both be (B,3,H,W) of the same size");
+  if (batch.aux.defined())
+    TORCH_CHECK(batch.aux.dim() == 4 && batch.aux.size(0) == batch.noisy.size(0) &&
+                    batch.aux.size(2) == batch.noisy.size(2) &&
+                    batch.aux.size(3) == batch.noisy.size(3),
+                "aux must be (B,C,H,W) matching the noisy image");
+}
+
+}  // namespace
+
+torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& schedule,
+                            Prediction prediction, const TrainBatch& batch,
+                            torch::Generator& generator) {
+  checkBatch(batch);
+  const auto x0 = modelSpaceFromTonemapped(batch.target);
+  const auto cond = modelSpaceFromTonemapped(batch.noisy);
+  const int64_t b = x0.size(0);
+  auto steps = torch::randint(0, schedule.size(), {b}, generator, torch::kLong);
+  auto noise = torch::randn(x0.sizes(), generator, x0.options());
+  auto alpha_bar = alphaBarAt(schedule, steps);
+  auto z_t = forwardDiffuse(x0, noise, alpha_bar);
+  auto output = model.predict(z_t, modelTimestepsAt(schedule, steps), cond, batch.aux);
+  return torch::mse_loss(output, predictionTarget(prediction, x0, noise, alpha_bar));
+}
+
+Trainer::Trainer(std::shared_ptr<ConditionalDenoiser> model, ModelInfo info, TrainerOptions options)
+    : model_(std::move(model)),
+      info_(std::move(info)),
+      options_(options),
+      schedule_(info_.trainingSchedule()),
+      generator_(at::detail::createCPUGenerator(options.seed)) {
+  for (auto& parameter : model_->parameters())
+    if (parameter.requires_grad()) trainable_.push_back(parameter);
+  TORCH_CHECK(!trainable_.empty(), "the model has no trainable parameters");
+  for (auto& parameter : trainable_) ema_.push_back(parameter.detach().clone());
+  optimizer_ = std::make_unique<torch::optim::AdamW>(
+      trainable_,
+      torch::optim::AdamWOptions(options_.learning_rate).weight_decay(options_.weight_decay));
+}
+
+double Trainer::currentLearningRate() const {
+  if (options_.halve_every <= 0) return options_.learning_rate;
+  return options_.learning_rate * std::pow(0.5, double(step_ / options_.halve_every));
+}
+
+StepStats Trainer::step(const TrainBatch& batch) {
+  model_->train();
+  const double lr = currentLearningRate();
+  for (auto& group : optimizer_->param_groups())
+    static_cast<torch::optim::AdamWOptions&>(group.options()).lr(lr);
+  optimizer_->zero_grad();
+  auto loss = diffusionLoss(*model_, schedule_, info_.prediction, batch, generator_);
+  loss.backward();
+  if (options_.max_grad_norm > 0)
+    torch::nn::utils::clip_grad_norm_(trainable_, options_.max_grad_norm);
+  optimizer_->step();
+  ++step_;
+  updateEma();
+  return {step_, loss.item<double>(), lr};
+}
+
+double Trainer::evaluate(const TrainBatch& batch, uint64_t seed) {
+  torch::NoGradGuard no_grad;
+  model_->eval();
+  auto generator = at::detail::createCPUGenerator(seed);
+  return diffusionLoss(*model_, schedule_, info_.prediction, batch, generator).item<double>();
+}
+
+void Trainer::updateEma() {
+  torch::NoGradGuard no_grad;
+  // Warm-up: early averages would otherwise be dominated by the initial weights.
+  const double decay = std::min(options_.ema_decay, (1.0 + step_) / (10.0 + step_));
+  for (size_t i = 0; i < ema_.size(); ++i) ema_[i].mul_(decay).add_(trainable_[i], 1.0 - decay);
+}
+
+void Trainer::swapEma() {
+  torch::NoGradGuard no_grad;
+  for (size_t i = 0; i < ema_.size(); ++i) {
+    auto current = trainable_[i].detach().clone();
+    trainable_[i].copy_(ema_[i]);
+    ema_[i].copy_(current);
+  }
+}
+
+void Trainer::saveEmaModel(const std::string& path) {
+  swapEma();
+  try {
+    saveModelFile(path, info_, *model_);
+  } catch (...) {
+    swapEma();
+    throw;
+  }
+  swapEma();
+}
+
+void Trainer::saveCheckpoint(const std::string& path) {
+  torch::serialize::OutputArchive archive, model_archive, optimizer_archive, ema_archive;
+  model_->save(model_archive);
+  optimizer_->save(optimizer_archive);
+  for (size_t i = 0; i < ema_.size(); ++i) ema_archive.write(std::to_string(i), ema_[i]);
+  archive.write("model", model_archive);
+  archive.write("optimizer", optimizer_archive);
+  archive.write("ema", ema_archive);
+  archive.write("step", torch::tensor(step_, torch::kLong));
+  archive.write("rng", generator_.get_state());
+  writeArchiveFile(path, "checkpoint", modelInfoToText(info_), archive);
+}
+
+void Trainer::loadCheckpoint(const std::string& path) {
+  auto file = readArchiveFile(path, "checkpoint");
+  if (file.text != modelInfoToText(info_))
+    throw ModelError(path + ": checkpoint was written for a different model configuration");
+  try {
+    torch::serialize::InputArchive model_archive, optimizer_archive, ema_archive;
+    file.archive.read("model", model_archive);
+    loadModuleWeights(*model_, model_archive, path);
+    file.archive.read("optimizer", optimizer_archive);
+    optimizer_->load(optimizer_archive);
+    file.archive.read("ema", ema_archive);
+    for (size_t i = 0; i < ema_.size(); ++i) {
+      torch::Tensor value;
+      ema_archive.read(std::to_string(i), value);
+      if (!value.sizes().equals(ema_[i].sizes()))
+        throw ModelError(path + ": EMA weight " + std::to_string(i) + " has the wrong shape");
+      ema_[i].copy_(value);
+    }
+    torch::Tensor step, rng;
+    file.archive.read("step", step);
+    file.archive.read("rng", rng);
+    step_ = step.item<int64_t>();
+    generator_.set_state(rng);
+  } catch (const c10::Error& error) {
+    const std::string what = error.what_without_backtrace();
+    throw ModelError(path + ": incomplete checkpoint (" + what.substr(0, what.find('\n')) + ")");
+  }
+}
+
+}  // namespace dn
