@@ -234,7 +234,16 @@ TEST_CASE("bad inputs are rejected") {
   CHECK_THROWS_AS(flip::statistics(Image()), std::invalid_argument);
 }
 
-TEST_CASE("a black reference still gives a defined HDR-FLIP") {
+TEST_CASE("exposure range of mostly and entirely black references") {
+  // flip-evaluator 1.7 on a 2x2 grey image with luminances 0, 0, 0, 4: start
+  // -0.91670, stop 24.08330, 25 exposures (the median is floored at float epsilon).
+  Image mostlyBlack(2, 2, 3, 0.0f);
+  for (int c = 0; c < 3; ++c) mostlyBlack.at(1, 1, c) = 4.0f;
+  const flip::ExposureRange dark = flip::exposureRange(mostlyBlack);
+  CHECK(dark.start == doctest::Approx(-0.91670).epsilon(1e-4));
+  CHECK(dark.stop == doctest::Approx(24.08330).epsilon(1e-5));
+  CHECK(dark.count == 25);
+
   const Image black(24, 24, 3, 0.0f);
   Image lit(24, 24, 3, 0.0f);
   lit.at(12, 12, 0) = 5.0f;

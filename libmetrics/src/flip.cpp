@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -451,20 +452,20 @@ ExposureRange exposureRange(const Image& referenceLinear, const HdrOptions& opti
   if (!options.startExposure || !options.stopExposure) {
     std::vector<float> luminances(referenceLinear.pixelCount());
     float brightest = 0.0f;
-    float dimmest = 0.0f;  // smallest non-zero luminance
     for (std::size_t i = 0; i < luminances.size(); ++i) {
       const float* p = &referenceLinear.pixels[i * referenceLinear.channels];
-      const float l = luminance({std::max(p[0], 0.0f), std::max(p[1], 0.0f), std::max(p[2], 0.0f)});
-      luminances[i] = l;
-      brightest = std::max(brightest, l);
-      if (l > 0.0f && (dimmest == 0.0f || l < dimmest)) dimmest = l;
+      luminances[i] = luminance({std::max(p[0], 0.0f), std::max(p[1], 0.0f), std::max(p[2], 0.0f)});
+      brightest = std::max(brightest, luminances[i]);
     }
     const auto middle = luminances.begin() + luminances.size() / 2;
     std::nth_element(luminances.begin(), middle, luminances.end());
-    const float median = *middle > 0.0f ? *middle : dimmest;
+    // flip-evaluator 1.7 floors the median at float epsilon (mostly black references).
+    const float median = std::max(*middle, std::numeric_limits<float>::epsilon());
     const float input = tonemapperInputFor(kExposureTarget, rationalCurve(options.tonemapper));
-    range.start = brightest > 0.0f ? std::log2(input / brightest) : 0.0f;
-    range.stop = median > 0.0f ? std::log2(input / median) : 0.0f;
+    if (brightest > 0.0f) {
+      range.start = std::log2(input / brightest);
+      range.stop = std::log2(input / median);
+    }  // else an all-black reference, where the reference fails: keep [0, 0]
   }
   if (options.startExposure) range.start = *options.startExposure;
   if (options.stopExposure) range.stop = *options.stopExposure;

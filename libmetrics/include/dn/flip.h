@@ -37,9 +37,8 @@ struct ExposureRange {
 };
 
 // The exposures hdrErrorMap() will use for this reference and these options.
-// Where the reference's rule is undefined (a reference whose median luminance
-// is 0) the smallest non-zero luminance stands in for the median, and an
-// all-black reference gives the range [0, 0].
+// As in flip-evaluator 1.7 the median luminance is floored at float epsilon;
+// an all-black reference (which the reference rejects) gives the range [0, 0].
 ExposureRange exposureRange(const Image& referenceLinear, const HdrOptions& options = {});
 
 // Inputs are sRGB-encoded with values in [0,1] (others are clamped), at least
