@@ -1,0 +1,34 @@
+// How render buffers become network inputs, shared by training and inference so
+// both see exactly the same numbers. Every mapping is per pixel (no per-image
+// statistics), so a tile of a frame is prepared exactly like the whole frame.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "dn/tonemap.h"
+
+namespace dn {
+
+// Linear HDR radiance (B,3,H,W) -> model range [0, 1): clamp to [0, 6], then the curve.
+torch::Tensor tonemapRadiance(const torch::Tensor& radiance, tonemap::Curve curve);
+// The exact inverse on the way out (values clamped to the curve's range first).
+torch::Tensor inverseTonemapRadiance(const torch::Tensor& tonemapped, tonemap::Curve curve);
+
+// Aux buffers concatenated in `buffers` order (B,C,H,W) -> normalized inputs:
+// light passes, emission and environment like radiance; albedo and colour
+// passes and shader AOVs clamped to [0, 1]; normals clamped to [-1, 1]; depth
+// log-compressed to [0, 1]; variances log-compressed.
+torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::string>& buffers,
+                           tonemap::Curve curve);
+
+// Total channel count of the named canonical buffers; throws on an unknown name.
+int64_t auxChannelCount(const std::vector<std::string>& buffers);
+
+// The default model's inputs: what Blender/Cycles writes with Denoising Data and
+// the diffuse, glossy and transmission light passes (direct, indirect, colour).
+const std::vector<std::string>& defaultAuxBuffers();
+
+}  // namespace dn

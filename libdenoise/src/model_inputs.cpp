@@ -1,0 +1,104 @@
+#include "dn/model_inputs.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "dn/buffers.h"
+
+namespace dn {
+
+namespace {
+
+constexpr double kDepthRange = 1000.0;  // scene units; farther (or background) saturates
+
+torch::Tensor applyCurve(const torch::Tensor& v, tonemap::Curve curve) {
+  switch (curve) {
+    case tonemap::Curve::Log: return tonemap::kLogScale * torch::log1p(v);
+    case tonemap::Curve::Gamma: return tonemap::kGammaScale * torch::pow(v, tonemap::kGammaExponent);
+    case tonemap::Curve::Reinhard: return v / (1 + v);
+    case tonemap::Curve::Linear: return v / tonemap::kHdrMax;
+    case tonemap::Curve::Srgb: break;
+  }
+  throw std::invalid_argument("unsupported radiance curve for the model");
+}
+
+enum class AuxKind { Radiance, Unit, Normal, Depth, Variance };
+
+AuxKind kindOf(const std::string& name) {
+  if (name == "normal") return AuxKind::Normal;
+  if (name == "depth") return AuxKind::Depth;
+  if (name == "color_variance") return AuxKind::Variance;
+  if (name == "albedo" || name.find("_color") != std::string::npos || name == "roughness" ||
+      name == "metallic" || name == "transmission")
+    return AuxKind::Unit;
+  return AuxKind::Radiance;  // direct/indirect light, emission, environment
+}
+
+}  // namespace
+
+torch::Tensor tonemapRadiance(const torch::Tensor& radiance, tonemap::Curve curve) {
+  return applyCurve(torch::nan_to_num(radiance, 0.0, 0.0, 0.0).clamp(0.0, tonemap::kHdrMax), curve);
+}
+
+torch::Tensor inverseTonemapRadiance(const torch::Tensor& t, tonemap::Curve curve) {
+  const double top = tonemap::apply(curve, tonemap::kHdrMax);
+  torch::Tensor v = t.clamp(0.0, top);
+  switch (curve) {
+    case tonemap::Curve::Log: return torch::expm1(v / tonemap::kLogScale);
+    case tonemap::Curve::Gamma:
+      return torch::pow(v / tonemap::kGammaScale, 1.0 / tonemap::kGammaExponent);
+    case tonemap::Curve::Reinhard: return v / (1 - v);
+    case tonemap::Curve::Linear: return v * tonemap::kHdrMax;
+    case tonemap::Curve::Srgb: break;
+  }
+  throw std::invalid_argument("unsupported radiance curve for the model");
+}
+
+int64_t auxChannelCount(const std::vector<std::string>& buffers) {
+  int64_t channels = 0;
+  for (const auto& name : buffers) {
+    const BufferSpec* spec = findBufferSpec(name);
+    if (!spec || name == "color") throw std::invalid_argument("'" + name + "' is not an aux buffer");
+    channels += spec->channels;
+  }
+  return channels;
+}
+
+torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::string>& buffers,
+                           tonemap::Curve curve) {
+  if (aux.size(1) != auxChannelCount(buffers))
+    throw std::invalid_argument("aux tensor has " + std::to_string(aux.size(1)) +
+                                " channels, the buffers need " +
+                                std::to_string(auxChannelCount(buffers)));
+  std::vector<torch::Tensor> parts;
+  int64_t offset = 0;
+  torch::Tensor clean = torch::nan_to_num(aux, 0.0, 0.0, 0.0);
+  for (const auto& name : buffers) {
+    const int64_t channels = findBufferSpec(name)->channels;
+    torch::Tensor x = clean.narrow(1, offset, channels);
+    offset += channels;
+    switch (kindOf(name)) {
+      case AuxKind::Radiance: parts.push_back(tonemapRadiance(x, curve)); break;
+      case AuxKind::Unit: parts.push_back(x.clamp(0.0, 1.0)); break;
+      case AuxKind::Normal: parts.push_back(x.clamp(-1.0, 1.0)); break;
+      case AuxKind::Depth:
+        parts.push_back(torch::log1p(x.clamp(0.0, kDepthRange)) / std::log1p(kDepthRange));
+        break;
+      case AuxKind::Variance: parts.push_back(0.1 * torch::log1p(x.clamp_min(0.0))); break;
+    }
+  }
+  return torch::cat(parts, 1);
+}
+
+const std::vector<std::string>& defaultAuxBuffers() {
+  static const std::vector<std::string> buffers = {
+      "albedo",           "normal",
+      "depth",            "diffuse_direct",
+      "diffuse_indirect", "diffuse_color",
+      "glossy_direct",    "glossy_indirect",
+      "glossy_color",     "transmission_direct",
+      "transmission_indirect", "transmission_color"};
+  return buffers;
+}
+
+}  // namespace dn
