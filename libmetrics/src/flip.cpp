@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -79,7 +81,8 @@ Vec3 yCxCzToXyz(Vec3 c) {
 
 float labCompand(float t) {
   constexpr float delta = 6.0f / 29.0f;
-  return t > delta * delta * delta ? std::cbrt(t) : t / (3.0f * delta * delta) + 4.0f / 29.0f;
+  return t > delta * delta * delta ? std::pow(t, 1.0f / 3.0f)
+                                   : t / (3.0f * delta * delta) + 4.0f / 29.0f;
 }
 
 // CIELAB with the Hunt effect applied: chroma scales with lightness.
@@ -259,29 +262,43 @@ void padRow(const float* row, int width, int pad, float* buf) {
   std::fill(buf + pad + width, buf + 2 * pad + width, row[width - 1]);
 }
 
-// out[x] = sum_k taps[k] * in[x + k - r]; `in` points at x = 0 of a padded row.
-void convolveRow(const float* __restrict in, const std::vector<float>& taps, int width,
-                 float* __restrict out) {
-  const int radius = static_cast<int>(taps.size()) / 2;
-  std::fill(out, out + width, 0.0f);
-  for (std::size_t k = 0; k < taps.size(); ++k) {
-    const float w = taps[k];
-    const float* src = in + static_cast<int>(k) - radius;
-    for (int x = 0; x < width; ++x) out[x] += w * src[x];
+// out[x] = sum_k taps[k] * sourceRow(k)[x]. Sums run over blocks of x kept in
+// registers, in tap order (as the reference does, so rounding matches).
+template <class SourceRow>
+void weightedRowSum(SourceRow sourceRow, const std::vector<float>& taps, int width,
+                    float* __restrict out) {
+  constexpr int kBlock = 32;
+  for (int x0 = 0; x0 < width; x0 += kBlock) {
+    float sum[kBlock] = {};
+    const int n = std::min(kBlock, width - x0);
+    for (std::size_t k = 0; k < taps.size(); ++k) {
+      const float w = taps[k];
+      const float* __restrict src = sourceRow(static_cast<int>(k)) + x0;
+      if (n == kBlock)
+        for (int j = 0; j < kBlock; ++j) sum[j] += w * src[j];
+      else
+        for (int j = 0; j < n; ++j) sum[j] += w * src[j];
+    }
+    std::copy(sum, sum + n, out + x0);
   }
+}
+
+// out[x] = sum_k taps[k] * in[x + k - r]; `in` points at x = 0 of a padded row.
+void convolveRow(const float* in, const std::vector<float>& taps, int width, float* out) {
+  const int radius = static_cast<int>(taps.size()) / 2;
+  weightedRowSum([&](int k) { return in + k - radius; }, taps, width, out);
 }
 
 // out[x] = sum_k taps[k] * plane[clamp(y + k - r)][x].
 void convolveColumn(const std::vector<float>& plane, int width, int height, int y,
-                    const std::vector<float>& taps, float* __restrict out) {
+                    const std::vector<float>& taps, float* out) {
   const int radius = static_cast<int>(taps.size()) / 2;
-  std::fill(out, out + width, 0.0f);
-  for (std::size_t k = 0; k < taps.size(); ++k) {
-    const int row = std::min(std::max(y + static_cast<int>(k) - radius, 0), height - 1);
-    const float* __restrict src = plane.data() + static_cast<std::size_t>(row) * width;
-    const float w = taps[k];
-    for (int x = 0; x < width; ++x) out[x] += w * src[x];
-  }
+  weightedRowSum(
+      [&](int k) {
+        const int row = std::min(std::max(y + k - radius, 0), height - 1);
+        return plane.data() + static_cast<std::size_t>(row) * width;
+      },
+      taps, width, out);
 }
 
 // LDR-FLIP on images of one size, reusing its buffers across calls (HDR-FLIP
@@ -393,8 +410,8 @@ class LdrFlip {
             remapColorDifference(std::pow(hyab(lab[0], lab[1]), kColorExponent), pcMax);
         const float featureDifference =
             std::max(std::fabs(edge[0] - edge[1]), std::fabs(point[0] - point[1]));
-        const float feature =
-            std::pow(featureDifference * (1.0f / std::sqrt(2.0f)), kFeatureExponent);
+        static_assert(kFeatureExponent == 0.5f, "the square root below is x^q_f");
+        const float feature = std::sqrt(featureDifference * (1.0f / std::sqrt(2.0f)));
         out[x] = std::max(out[x], std::pow(color, 1.0f - feature));
       }
     }
@@ -441,6 +458,29 @@ float tonemapperInputFor(float target, const RationalCurve& c) {
   if (a == 0.0f) return -k / b;
   const float mid = -0.5f * (b / a);
   return mid + std::sqrt(mid * mid - k / a);
+}
+
+// Sorts floats in O(n): three 11-bit radix passes over keys whose unsigned
+// order is the float order (error maps have millions of pixels).
+void radixSort(std::vector<float>& values) {
+  constexpr std::uint32_t kSign = 0x80000000u;
+  std::vector<std::uint32_t> keys(values.size()), buffer(values.size());
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    std::uint32_t bits;
+    std::memcpy(&bits, &values[i], sizeof bits);
+    keys[i] = (bits & kSign) ? ~bits : (bits | kSign);
+  }
+  for (int shift = 0; shift < 32; shift += 11) {
+    std::vector<std::size_t> start(2049, 0);
+    for (std::uint32_t k : keys) ++start[((k >> shift) & 2047u) + 1];
+    for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+    for (std::uint32_t k : keys) buffer[start[(k >> shift) & 2047u]++] = k;
+    keys.swap(buffer);
+  }
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const std::uint32_t bits = (keys[i] & kSign) ? (keys[i] & ~kSign) : ~keys[i];
+    std::memcpy(&values[i], &bits, sizeof bits);
+  }
 }
 
 }  // namespace
@@ -518,7 +558,7 @@ Stats statistics(const Image& errorMap) {
   std::vector<float> values(errorMap.pixelCount());
   for (std::size_t i = 0; i < values.size(); ++i)
     values[i] = errorMap.pixels[i * errorMap.channels];
-  std::sort(values.begin(), values.end());
+  radixSort(values);
 
   Stats s;
   double sum = 0.0;
