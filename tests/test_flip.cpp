@@ -149,6 +149,12 @@ TEST_CASE("error maps lie in [0,1] and LDR-FLIP is symmetric") {
     REQUIRE(v >= 0.0f);
     REQUIRE(v <= 1.0f);
   }
+  // Huge but finite radiance saturates instead of overflowing the tonemapper.
+  for (int c = 0; c < 3; ++c) test.at(7, 7, c) = 3e38f;
+  for (float v : flip::hdrErrorMap(reference, test).pixels) {
+    REQUIRE(v >= 0.0f);
+    REQUIRE(v <= 1.0f);
+  }
 }
 
 TEST_CASE("black against white is a large error, a small shift a small one") {
@@ -232,6 +238,13 @@ TEST_CASE("bad inputs are rejected") {
   none.numExposures = 0;
   CHECK_THROWS_AS(flip::hdrErrorMap(reference, test, none), std::invalid_argument);
   CHECK_THROWS_AS(flip::statistics(Image()), std::invalid_argument);
+  Image infinite = test;
+  infinite.at(3, 4, 1) = INFINITY;
+  CHECK_THROWS_AS(flip::hdrErrorMap(reference, infinite), std::invalid_argument);
+  CHECK_THROWS_AS(flip::exposureRange(infinite), std::invalid_argument);
+  Image notANumber = test;
+  notANumber.at(5, 6, 2) = NAN;
+  CHECK_THROWS_AS(flip::hdrErrorMap(notANumber, test), std::invalid_argument);
 }
 
 TEST_CASE("exposure range of mostly and entirely black references") {

@@ -139,8 +139,11 @@ struct DisplayMapping {
     if (srgbInput)
       return {clamp01(tonemap::srgbDecode(in[0])), clamp01(tonemap::srgbDecode(in[1])),
               clamp01(tonemap::srgbDecode(in[2]))};
-    Vec3 c{std::max(in[0], 0.0f) * exposureScale, std::max(in[1], 0.0f) * exposureScale,
-           std::max(in[2], 0.0f) * exposureScale};
+    // Capped so that the curves' squares stay finite; they saturate long before.
+    const auto expose = [this](float v) {
+      return std::min(std::max(v, 0.0f) * exposureScale, 1e15f);
+    };
+    Vec3 c{expose(in[0]), expose(in[1]), expose(in[2])};
     if (tonemapper == Tonemapper::Reinhard) {
       const float scale = 1.0f / (1.0f + luminance(c));
       return {clamp01(c.x * scale), clamp01(c.y * scale), clamp01(c.z * scale)};
@@ -450,6 +453,13 @@ void requirePositivePpd(double pixelsPerDegree, const char* what) {
     throw std::invalid_argument(std::string(what) + ": pixels per degree must be positive");
 }
 
+// Radiance must be finite: an infinite or NaN pixel has no place in the exposure range.
+void requireFinite(const Image& image, const char* what) {
+  for (float v : image.pixels)
+    if (!std::isfinite(v))
+      throw std::invalid_argument(std::string(what) + " has NaN or infinite values");
+}
+
 // Larger root of curve(x) = target, the input the tonemapper maps to target.
 float tonemapperInputFor(float target, const RationalCurve& c) {
   const float a = c[0] - target * c[3];
@@ -488,6 +498,7 @@ void radixSort(std::vector<float>& values) {
 ExposureRange exposureRange(const Image& referenceLinear, const HdrOptions& options) {
   if (referenceLinear.empty() || referenceLinear.channels < 3)
     throw std::invalid_argument("HDR-FLIP: reference needs at least 3 channels");
+  requireFinite(referenceLinear, "HDR-FLIP: reference");
   ExposureRange range;
   if (!options.startExposure || !options.stopExposure) {
     std::vector<float> luminances(referenceLinear.pixelCount());
@@ -535,6 +546,7 @@ Image hdrErrorMap(const Image& referenceLinear, const Image& testLinear,
                   const HdrOptions& options) {
   requireComparable(referenceLinear, testLinear, "HDR-FLIP");
   requirePositivePpd(options.pixelsPerDegree, "HDR-FLIP");
+  requireFinite(testLinear, "HDR-FLIP: test");
   const ExposureRange range = exposureRange(referenceLinear, options);
   Image error(referenceLinear.width, referenceLinear.height, 1, 0.0f);
   LdrFlip flip(error.width, error.height, static_cast<float>(options.pixelsPerDegree));
@@ -733,7 +745,8 @@ constexpr float kMagma[256][3] = {
 Image magmaHeatmap(const Image& errorMap) {
   Image heatmap(errorMap.width, errorMap.height, 3);
   for (std::size_t i = 0; i < errorMap.pixelCount(); ++i) {
-    const float e = clamp01(errorMap.pixels[i * errorMap.channels]);
+    const float v = errorMap.pixels[i * errorMap.channels];
+    const float e = v > 0.0f ? std::min(v, 1.0f) : 0.0f;  // NaN as 0
     const float* color = kMagma[static_cast<int>(e * 255.0f + 0.5f)];
     std::copy(color, color + 3, &heatmap.pixels[i * 3]);
   }

@@ -47,7 +47,8 @@ ExposureRange exposureRange(const Image& referenceLinear, const HdrOptions& opti
 Image ldrErrorMap(const Image& referenceSrgb, const Image& testSrgb,
                   double pixelsPerDegree = kDefaultPixelsPerDegree);
 
-// Inputs are linear RGB radiance (negative values count as 0).
+// Inputs are linear RGB radiance (negative values count as 0; NaN or infinite
+// values throw std::invalid_argument).
 Image hdrErrorMap(const Image& referenceLinear, const Image& testLinear,
                   const HdrOptions& options = {});
 
