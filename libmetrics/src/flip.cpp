@@ -12,9 +12,9 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
+#include "dn/parallel.h"
 #include "dn/tonemap.h"
 
 namespace dn::flip {
@@ -155,20 +155,6 @@ struct DisplayMapping {
     return {map(c.x), map(c.y), map(c.z)};
   }
 };
-
-// Runs band(y0, y1) over contiguous bands of [0, rows) on all cores.
-template <class Band>
-void forRowBands(int rows, Band&& band) {
-  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  const int bands = std::max(1, std::min(cores, rows / 16));
-  std::vector<std::thread> workers;
-  workers.reserve(bands - 1);
-  for (int i = 1; i < bands; ++i)
-    workers.emplace_back(
-        [&band, y0 = rows * i / bands, y1 = rows * (i + 1) / bands] { band(y0, y1); });
-  band(0, rows / bands);
-  for (auto& worker : workers) worker.join();
-}
 
 // 1D taps of the separated contrast sensitivity filters. The blue-yellow
 // filter is a sum of two Gaussians, so it separates into two x-y pairs whose
@@ -325,11 +311,11 @@ class LdrFlip {
                      float* error) {
     toOpponent(reference, display, opponent_[0]);
     toOpponent(test, display, opponent_[1]);
-    forRowBands(height_, [&](int y0, int y1) {
+    parallelFor(height_, [&](int y0, int y1) {
       filterRows(opponent_[0], rows_[0], y0, y1);
       filterRows(opponent_[1], rows_[1], y0, y1);
     });
-    forRowBands(height_, [&](int y0, int y1) { filterColumnsAndCompare(error, y0, y1); });
+    parallelFor(height_, [&](int y0, int y1) { filterColumnsAndCompare(error, y0, y1); });
   }
 
  private:
@@ -343,7 +329,7 @@ class LdrFlip {
   }
 
   void toOpponent(const Image& image, const DisplayMapping& display, OpponentPlanes& out) {
-    forRowBands(height_, [&](int y0, int y1) {
+    parallelFor(height_, [&](int y0, int y1) {
       for (int y = y0; y < y1; ++y)
         for (int x = 0; x < width_; ++x) {
           const std::size_t i = static_cast<std::size_t>(y) * width_ + x;

@@ -6,6 +6,7 @@
 // found with Gaussian-derivative filters, and combines the two per pixel.
 // HDR-FLIP tonemaps both images at a range of exposures and keeps, per pixel,
 // the largest LDR-FLIP error. Error maps have one channel with values in [0,1].
+// Work is spread over rows on dn::kernelThreadCount() threads (dn/parallel.h).
 #pragma once
 
 #include <optional>
