@@ -83,7 +83,8 @@ std::vector<int64_t> sectionTimesteps(int64_t n, const std::vector<int64_t>& cou
                                   " steps from a section of " + std::to_string(size));
     const double stride = counts[i] > 1 ? double(size - 1) / double(counts[i] - 1) : 1.0;
     for (int64_t k = 0; k < counts[i]; ++k)
-      taken.insert(start + static_cast<int64_t>(std::llround(k * stride)));
+      // Ties to even, as Python's round() in the reference respacing code.
+      taken.insert(start + static_cast<int64_t>(std::nearbyint(k * stride)));
     start += size;
   }
   return {taken.begin(), taken.end()};
