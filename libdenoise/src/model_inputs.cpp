@@ -13,11 +13,16 @@ constexpr double kDepthRange = 1000.0;  // scene units; farther (or background) 
 
 torch::Tensor applyCurve(const torch::Tensor& v, tonemap::Curve curve) {
   switch (curve) {
-    case tonemap::Curve::Log: return tonemap::kLogScale * torch::log1p(v);
-    case tonemap::Curve::Gamma: return tonemap::kGammaScale * torch::pow(v, tonemap::kGammaExponent);
-    case tonemap::Curve::Reinhard: return v / (1 + v);
-    case tonemap::Curve::Linear: return v / tonemap::kHdrMax;
-    case tonemap::Curve::Srgb: break;
+    case tonemap::Curve::Log:
+      return tonemap::kLogScale * torch::log1p(v);
+    case tonemap::Curve::Gamma:
+      return tonemap::kGammaScale * torch::pow(v, tonemap::kGammaExponent);
+    case tonemap::Curve::Reinhard:
+      return v / (1 + v);
+    case tonemap::Curve::Linear:
+      return v / tonemap::kHdrMax;
+    case tonemap::Curve::Srgb:
+      break;
   }
   throw std::invalid_argument("unsupported radiance curve for the model");
 }
@@ -44,12 +49,16 @@ torch::Tensor inverseTonemapRadiance(const torch::Tensor& t, tonemap::Curve curv
   const double top = tonemap::apply(curve, tonemap::kHdrMax);
   torch::Tensor v = t.clamp(0.0, top);
   switch (curve) {
-    case tonemap::Curve::Log: return torch::expm1(v / tonemap::kLogScale);
+    case tonemap::Curve::Log:
+      return torch::expm1(v / tonemap::kLogScale);
     case tonemap::Curve::Gamma:
       return torch::pow(v / tonemap::kGammaScale, 1.0 / tonemap::kGammaExponent);
-    case tonemap::Curve::Reinhard: return v / (1 - v);
-    case tonemap::Curve::Linear: return v * tonemap::kHdrMax;
-    case tonemap::Curve::Srgb: break;
+    case tonemap::Curve::Reinhard:
+      return v / (1 - v);
+    case tonemap::Curve::Linear:
+      return v * tonemap::kHdrMax;
+    case tonemap::Curve::Srgb:
+      break;
   }
   throw std::invalid_argument("unsupported radiance curve for the model");
 }
@@ -58,7 +67,8 @@ int64_t auxChannelCount(const std::vector<std::string>& buffers) {
   int64_t channels = 0;
   for (const auto& name : buffers) {
     const BufferSpec* spec = findBufferSpec(name);
-    if (!spec || name == "color") throw std::invalid_argument("'" + name + "' is not an aux buffer");
+    if (!spec || name == "color")
+      throw std::invalid_argument("'" + name + "' is not an aux buffer");
     channels += spec->channels;
   }
   return channels;
@@ -78,26 +88,39 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
     torch::Tensor x = clean.narrow(1, offset, channels);
     offset += channels;
     switch (kindOf(name)) {
-      case AuxKind::Radiance: parts.push_back(tonemapRadiance(x, curve)); break;
-      case AuxKind::Unit: parts.push_back(x.clamp(0.0, 1.0)); break;
-      case AuxKind::Normal: parts.push_back(x.clamp(-1.0, 1.0)); break;
+      case AuxKind::Radiance:
+        parts.push_back(tonemapRadiance(x, curve));
+        break;
+      case AuxKind::Unit:
+        parts.push_back(x.clamp(0.0, 1.0));
+        break;
+      case AuxKind::Normal:
+        parts.push_back(x.clamp(-1.0, 1.0));
+        break;
       case AuxKind::Depth:
         parts.push_back(torch::log1p(x.clamp(0.0, kDepthRange)) / std::log1p(kDepthRange));
         break;
-      case AuxKind::Variance: parts.push_back(0.1 * torch::log1p(x.clamp_min(0.0))); break;
+      case AuxKind::Variance:
+        parts.push_back(0.1 * torch::log1p(x.clamp_min(0.0)));
+        break;
     }
   }
   return torch::cat(parts, 1);
 }
 
 const std::vector<std::string>& defaultAuxBuffers() {
-  static const std::vector<std::string> buffers = {
-      "albedo",           "normal",
-      "depth",            "diffuse_direct",
-      "diffuse_indirect", "diffuse_color",
-      "glossy_direct",    "glossy_indirect",
-      "glossy_color",     "transmission_direct",
-      "transmission_indirect", "transmission_color"};
+  static const std::vector<std::string> buffers = {"albedo",
+                                                   "normal",
+                                                   "depth",
+                                                   "diffuse_direct",
+                                                   "diffuse_indirect",
+                                                   "diffuse_color",
+                                                   "glossy_direct",
+                                                   "glossy_indirect",
+                                                   "glossy_color",
+                                                   "transmission_direct",
+                                                   "transmission_indirect",
+                                                   "transmission_color"};
   return buffers;
 }
 

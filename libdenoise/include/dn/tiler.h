@@ -28,8 +28,9 @@ class Tiler {
 
   // fn maps (N,*,h,w) slices of `inputs` to an (N,C,h,w) output; returns the
   // blended (N,C,H,W) full-frame output.
-  torch::Tensor apply(const std::vector<torch::Tensor>& inputs,
-                      const std::function<torch::Tensor(const std::vector<torch::Tensor>&)>& fn) const;
+  torch::Tensor apply(
+      const std::vector<torch::Tensor>& inputs,
+      const std::function<torch::Tensor(const std::vector<torch::Tensor>&)>& fn) const;
 
  private:
   torch::Tensor weights(const TileRect& r) const;  // (1,1,h,w)

@@ -1,0 +1,317 @@
+// dndenoise: denoise Monte Carlo renders with a diffusion model and the
+// renderer's feature buffers.
+//   dndenoise IN.exr -o OUT.exr
+//   dndenoise --color c.pfm --albedo a.pfm --normal n.pfm ... -o OUT.exr
+//   dndenoise shot.####.exr -o out.####.exr
+#include <fmt/format.h>
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+
+#include "common/cli.h"
+#include "common/sequence.h"
+#include "dn/buffer_io.h"
+#include "dn/denoiser.h"
+#include "dn/metrics.h"
+#include "dn/parallel.h"
+
+namespace fs = std::filesystem;
+using namespace dn;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+const char* kUsage = R"(usage: dndenoise [options] IN.exr -o OUT.exr
+       dndenoise [options] --color FILE [--albedo FILE --normal FILE ...] -o OUT
+       dndenoise [options] IN.####.exr -o OUT.####.exr      (frame sequences; also %04d)
+       dndenoise [options] A.exr B.exr ... -o DIR/           (many files, model loaded once)
+
+Denoises renders with the diffusion model. Multilayer EXRs from Blender/Cycles
+(Denoising Data and light passes enabled) and other renderers' usual channel
+names are read as they are; the result is added as a layer beside every input
+layer and the input's metadata (or written alone with --rgb-only).
+
+model and sampling:
+  --model FILE        model file (default: $DN_MODEL, else the shipped models/default.dnm)
+  --steps N           diffusion steps of the respaced schedule (default: the model's, 27)
+  --skip S            skip the S noisiest steps, starting from the noised render
+                      (default: the model's tuned value)
+  --sampler ddpm|ddim sampler (default ddpm); --eta E for DDIM
+  --seed N            random seed (default 0): same seed, same output
+  --samples K         mean of K samples, plus their standard deviation as an
+                      'uncertainty' layer
+input buffers:
+  --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
+                      one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
+  --channels BUF=C1,C2,C3  take a buffer from these channels (repeatable)
+  --view-layer NAME   which view layer of a multilayer file (default: the first)
+output:
+  -o, --output PATH   output file, pattern or folder (required)
+  --layer NAME        result layer name (default: Denoised, in the input's view layer)
+  --rgb-only          write a plain RGB image, no other layers
+  --float             float result channels (default: half)
+  --inplace           allow the output to replace the input file
+resources:
+  --tile N            network tile size in pixels (default: from --maxmem)
+  --overlap N         tile overlap (default 32)
+  --maxmem MB         memory budget for network activations (default 3000)
+  --threads N         CPU threads (default: all cores)
+  --device cpu|cuda   (default cpu)
+checks and timing:
+  --ref REF --maxerror [METRIC=]V   exit 2 if the result is worse than V against REF
+                      (METRIC: l1 (default), mse, relmse, psnr, ssim, smape, flip)
+  -n N                denoise N times and report the times
+  -v                  progress with ETA and input statistics on stderr
+  -h, --help          this text
+exit codes: 0 ok, 1 bad input or arguments, 2 a --maxerror check failed
+)";
+
+struct Options {
+  std::vector<std::string> inputs;
+  std::map<std::string, std::string> separateFiles;  // buffer -> file
+  ReadOptions read;
+  std::string output, model, layer = "Denoised", reference, maxErrorMetric = "l1", device = "cpu";
+  double maxError = -1.0;
+  bool rgbOnly = false, floatOut = false, inplace = false, verbose = false;
+  int repeats = 1;
+  DenoiseOptions denoise;
+};
+
+std::string defaultModelPath() {
+  if (const char* env = std::getenv("DN_MODEL"); env && *env) return env;
+  return DN_DEFAULT_MODEL;
+}
+
+Options parseArgs(int argc, char** argv) {
+  cli::Args args(argc, argv);
+  Options o;
+  o.model = defaultModelPath();
+  while (!args.done()) {
+    std::string a = args.peek();
+    if (args.flag("-h", "--help")) {
+      std::fputs(kUsage, stdout);
+      std::exit(cli::kExitOk);
+    } else if (args.flag("-o", "--output")) {
+      o.output = args.value("-o");
+    } else if (args.flag("--model")) {
+      o.model = args.value("--model");
+    } else if (args.flag("--steps")) {
+      o.denoise.respacing = std::to_string(args.intValue("--steps"));
+    } else if (args.flag("--skip")) {
+      o.denoise.skip = args.intValue("--skip");
+    } else if (args.flag("--sampler")) {
+      std::string s = args.value("--sampler");
+      if (s != "ddpm" && s != "ddim") throw cli::UsageError("--sampler must be ddpm or ddim");
+      o.denoise.sampler = s == "ddim" ? SamplerKind::Ddim : SamplerKind::Ddpm;
+    } else if (args.flag("--eta")) {
+      o.denoise.eta = args.doubleValue("--eta");
+    } else if (args.flag("--seed")) {
+      o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed"));
+    } else if (args.flag("--samples")) {
+      o.denoise.samples = args.intValue("--samples");
+      if (o.denoise.samples < 1) throw cli::UsageError("--samples must be at least 1");
+    } else if (args.flag("--channels")) {
+      try {
+        o.read.overrides.insert(parseChannelOverride(args.value("--channels")));
+      } catch (const std::invalid_argument& e) {
+        throw cli::UsageError(std::string("--channels: ") + e.what());
+      }
+    } else if (args.flag("--view-layer")) {
+      o.read.viewLayer = args.value("--view-layer");
+    } else if (args.flag("--layer")) {
+      o.layer = args.value("--layer");
+    } else if (args.flag("--rgb-only")) {
+      o.rgbOnly = true;
+    } else if (args.flag("--float")) {
+      o.floatOut = true;
+    } else if (args.flag("--inplace")) {
+      o.inplace = true;
+    } else if (args.flag("--tile")) {
+      o.denoise.tile = args.intValue("--tile");
+    } else if (args.flag("--overlap")) {
+      o.denoise.overlap = args.intValue("--overlap");
+    } else if (args.flag("--maxmem")) {
+      o.denoise.maxMemoryBytes = args.doubleValue("--maxmem") * 1e6;
+    } else if (args.flag("--threads")) {
+      int n = args.intValue("--threads");
+      torch::set_num_threads(n);
+      kernelThreadCount() = n;
+    } else if (args.flag("--device")) {
+      o.device = args.value("--device");
+    } else if (args.flag("--ref", "-r")) {
+      o.reference = args.value("--ref");
+    } else if (args.flag("--maxerror")) {
+      std::string v = args.value("--maxerror");
+      auto eq = v.find('=');
+      if (eq != std::string::npos) o.maxErrorMetric = v.substr(0, eq), v = v.substr(eq + 1);
+      if (!metrics::isMetricName(o.maxErrorMetric))
+        throw cli::UsageError("--maxerror: unknown metric '" + o.maxErrorMetric + "'");
+      o.maxError = cli::Args::toDouble("--maxerror", v);
+    } else if (args.flag("-n")) {
+      o.repeats = std::max(1, args.intValue("-n"));
+    } else if (args.flag("-v", "--verbose")) {
+      o.verbose = true;
+    } else if (a.size() > 2 && a[0] == '-' && a[1] == '-') {
+      std::string name = a.substr(2);
+      if (name == "alb") name = "albedo";
+      if (name == "nrm") name = "normal";
+      if (name == "hdr") name = "color";
+      if (!findBufferSpec(name)) throw cli::UsageError("unknown option '" + a + "' (see --help)");
+      args.flag(a);
+      o.separateFiles[name] = args.value(a);
+    } else if (a.size() > 1 && a[0] == '-') {
+      throw cli::UsageError("unknown option '" + a + "' (see --help)");
+    } else {
+      o.inputs.push_back(args.positional());
+    }
+  }
+  if (o.output.empty()) throw cli::UsageError("no output given: use -o OUT (see --help)");
+  if (o.inputs.empty() == o.separateFiles.empty())
+    throw cli::UsageError(o.inputs.empty()
+                              ? "no input given (see --help)"
+                              : "give either IN files or --color/--albedo/... files, not both");
+  if (o.maxError >= 0 && o.reference.empty()) throw cli::UsageError("--maxerror needs --ref REF");
+  if (o.device != "cpu" && o.device != "cuda")
+    throw cli::UsageError("--device must be cpu or cuda");
+  if (o.device == "cuda" && !torch::cuda::is_available())
+    throw cli::UsageError("--device cuda: this LibTorch build has no usable CUDA device");
+  return o;
+}
+
+// (input, output) pairs from files, patterns or a folder output.
+std::vector<std::pair<std::string, std::string>> planJobs(const Options& o) {
+  std::vector<std::pair<std::string, std::string>> jobs;
+  if (!o.separateFiles.empty()) return {{"", o.output}};
+  const cli::FramePattern outPattern = cli::parseFramePattern(o.output);
+  for (const auto& input : o.inputs) {
+    cli::FramePattern inPattern = cli::parseFramePattern(input);
+    if (inPattern.padding > 0) {
+      if (outPattern.padding == 0)
+        throw cli::UsageError("a frame sequence needs an output pattern such as out.####.exr");
+      auto frames = cli::findFrames(inPattern);
+      if (frames.empty()) throw IoError(input + ": no frames match this pattern");
+      for (const auto& [number, path] : frames)
+        jobs.emplace_back(path, cli::frameName(outPattern, number));
+    } else if (o.inputs.size() > 1 || fs::is_directory(o.output)) {
+      if (!fs::is_directory(o.output))
+        throw cli::UsageError("several inputs need -o to be an existing folder");
+      jobs.emplace_back(input, (fs::path(o.output) / fs::path(input).filename()).string());
+    } else {
+      jobs.emplace_back(input, o.output);
+    }
+  }
+  return jobs;
+}
+
+std::string clockText(double seconds) {
+  int s = static_cast<int>(std::lround(seconds));
+  return fmt::format("{:02d}:{:02d}", s / 60, s % 60);
+}
+
+// Counts what the model will not see as radiance: NaN/Inf and negative values.
+void reportInputStatistics(const std::string& name, const Image& color) {
+  std::size_t nonFinite = 0, negative = 0;
+  for (float v : color.pixels) nonFinite += !std::isfinite(v), negative += v < 0.0f;
+  fmt::print(stderr, "dndenoise: {}: {}x{}, {} NaN/Inf and {} negative values (treated as 0)\n",
+             name, color.width, color.height, nonFinite, negative);
+}
+
+void checkAgainstReference(const Options& o, const Image& result, int& status) {
+  Image ref = readImage(o.reference, 3);
+  countAndZeroNonFinite(ref);
+  auto values = metrics::compare(ref, result, {o.maxErrorMetric}).values;
+  double v = values.at(o.maxErrorMetric);
+  bool worse = metrics::higherIsBetter(o.maxErrorMetric) ? !(v >= o.maxError) : !(v <= o.maxError);
+  fmt::print(stderr, "dndenoise: {} against {}: {:.6g} (limit {:.6g}){}\n", o.maxErrorMetric,
+             o.reference, v, o.maxError, worse ? " FAILED" : "");
+  if (worse) status = cli::kExitThreshold;
+}
+
+int run(Options o) {
+  auto jobs = planJobs(o);
+  const auto loadStart = Clock::now();
+  Denoiser denoiser = [&] {
+    try {
+      return Denoiser::fromFile(o.model);
+    } catch (const ModelError& e) {
+      throw IoError(e.what());
+    }
+  }();
+  if (o.verbose)
+    fmt::print(stderr, "dndenoise: model {} loaded in {:.2f} s\n", o.model,
+               std::chrono::duration<double>(Clock::now() - loadStart).count());
+
+  int status = cli::kExitOk;
+  for (std::size_t j = 0; j < jobs.size(); ++j) {
+    const auto& [input, output] = jobs[j];
+    const std::string name = input.empty() ? o.separateFiles.at("color") : input;
+    std::error_code ec;
+    if (!input.empty() && !o.inplace && fs::exists(output, ec) && fs::equivalent(input, output, ec))
+      throw IoError(output + ": is the input file; refusing to overwrite it (use --inplace)");
+    FrameBuffers frame =
+        input.empty() ? readSeparateFiles(o.separateFiles) : readFrame(input, o.read);
+    auto missing = denoiser.missingBuffers(frame);
+    if (!missing.empty()) {
+      std::string needs, has;
+      for (const auto& b : denoiser.info().input_buffers) needs += (needs.empty() ? "" : ", ") + b;
+      for (const auto& b : frame.names()) has += (has.empty() ? "" : ", ") + b;
+      throw IoError(
+          fmt::format("{}: the model needs {}; the file has {} (enable Denoising Data and the "
+                      "light passes, or map channels with --channels)",
+                      name, needs, has));
+    }
+    if (o.verbose) reportInputStatistics(name, frame.get("color"));
+
+    DenoiseOptions options = o.denoise;
+    const auto start = Clock::now();
+    if (o.verbose)
+      options.progress = [&, j](double f) {
+        double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+        fmt::print(stderr, "\rdndenoise: [{}/{}] {:3.0f}%  elapsed {}  ETA {}   ", j + 1,
+                   jobs.size(), 100 * f, clockText(elapsed),
+                   clockText(f > 0 ? elapsed * (1 - f) / f : 0));
+      };
+    std::vector<double> times;
+    DenoiseResult result;
+    for (int r = 0; r < o.repeats; ++r) {
+      const auto t0 = Clock::now();
+      result = denoiser.denoise(frame, options);
+      times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    }
+    if (o.verbose) fmt::print(stderr, "\n");
+    if (o.verbose || o.repeats > 1) {
+      std::sort(times.begin(), times.end());
+      fmt::print(
+          stderr,
+          "dndenoise: {}: {} steps, {} tile(s) of {} px, {:.2f} s (median of {}), {:.2f} s/MPix\n",
+          name, result.steps, result.tileCount, result.tileSize, times[times.size() / 2],
+          times.size(), times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
+    }
+
+    WriteOptions write;
+    write.half = !o.floatOut;
+    write.rgbOnly = o.rgbOnly || input.empty();
+    write.layer = layerPrefixOf(frame) + o.layer;
+    if (!result.uncertainty.empty() && !write.rgbOnly)
+      write.extraLayers[layerPrefixOf(frame) + "uncertainty"] = result.uncertainty;
+    writeResult(input.empty() ? name : input, output, result.color, write, o.inplace);
+    if (o.verbose) fmt::print(stderr, "dndenoise: wrote {}\n", output);
+    if (!o.reference.empty() && o.maxError >= 0) checkAgainstReference(o, result.color, status);
+  }
+  return status;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(parseArgs(argc, argv));
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "dndenoise: {}\n", e.what());
+  }
+  return cli::kExitError;
+}

@@ -1,0 +1,62 @@
+// The inference pipeline: a model file plus one frame's buffers in, a denoised
+// HDR image out. Radiance is clamped and tonemapped, the aux buffers normalized
+// (dn/model_inputs.h), the reverse diffusion run with the network applied in
+// tiles, and the result inverse-tonemapped back to HDR.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "dn/buffers.h"
+#include "dn/image.h"
+#include "dn/model_file.h"
+#include "dn/sampler.h"
+
+namespace dn {
+
+struct DenoiseOptions {
+  std::string respacing;  // "" = the model's default (27 steps); "10" = 10 evenly spaced steps
+  int64_t skip = -1;      // noisiest steps to skip; -1 = the model's default
+  SamplerKind sampler = SamplerKind::Ddpm;
+  double eta = 0.0;      // DDIM only
+  uint64_t seed = 0;     // same seed, same output
+  int samples = 1;       // K > 1: mean of K samples and their standard deviation
+  int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes
+  int64_t overlap = 32;  // tile overlap in pixels
+  double maxMemoryBytes = 3.0e9;
+  std::function<void(double fraction)> progress;  // 0..1, after every network step
+};
+
+struct DenoiseResult {
+  Image color;        // linear HDR, 3 channels
+  Image uncertainty;  // per-pixel standard deviation over samples (samples > 1), 1 channel
+  int64_t steps = 0;  // network evaluations per sample
+  int64_t tileSize = 0;
+  std::size_t tileCount = 0;
+};
+
+class Denoiser {
+ public:
+  explicit Denoiser(LoadedModel model);
+  static Denoiser fromFile(const std::string& path);  // throws ModelError
+
+  const ModelInfo& info() const { return model_.info; }
+  // Buffers the model needs that the frame lacks (empty: ready to denoise).
+  std::vector<std::string> missingBuffers(const FrameBuffers& frame) const;
+  // Estimated activation bytes per pixel of one network evaluation (for tiling).
+  double bytesPerPixel() const;
+
+  // Throws std::invalid_argument when buffers are missing (see missingBuffers).
+  DenoiseResult denoise(const FrameBuffers& frame, const DenoiseOptions& options) const;
+
+ private:
+  LoadedModel model_;
+};
+
+// (1,C,H,W) float tensor of an interleaved image, and back.
+torch::Tensor imageToTensor(const Image& image);
+Image tensorToImage(const torch::Tensor& tensor);
+
+}  // namespace dn

@@ -1,0 +1,131 @@
+#include "dn/denoiser.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "dn/model_inputs.h"
+#include "dn/tiler.h"
+
+namespace dn {
+
+namespace {
+
+int64_t defaultSkip(const ModelInfo& info) {
+  auto it = info.notes.find("default_skip");
+  return it == info.notes.end() ? 0 : std::stoll(it->second);
+}
+
+}  // namespace
+
+torch::Tensor imageToTensor(const Image& image) {
+  auto hwc = torch::from_blob(const_cast<float*>(image.pixels.data()),
+                              {image.height, image.width, image.channels}, torch::kFloat32);
+  return hwc.permute({2, 0, 1}).unsqueeze(0).contiguous();
+}
+
+Image tensorToImage(const torch::Tensor& tensor) {
+  auto hwc = tensor.squeeze(0).permute({1, 2, 0}).contiguous().to(torch::kFloat32);
+  Image image(static_cast<int>(hwc.size(1)), static_cast<int>(hwc.size(0)),
+              static_cast<int>(hwc.size(2)));
+  std::copy_n(hwc.data_ptr<float>(), image.size(), image.pixels.begin());
+  return image;
+}
+
+Denoiser::Denoiser(LoadedModel model) : model_(std::move(model)) { model_.model->eval(); }
+
+Denoiser Denoiser::fromFile(const std::string& path) { return Denoiser(loadModelFile(path)); }
+
+std::vector<std::string> Denoiser::missingBuffers(const FrameBuffers& frame) const {
+  std::vector<std::string> missing;
+  for (const auto& name : info().input_buffers)
+    if (!frame.has(name)) missing.push_back(name);
+  return missing;
+}
+
+double Denoiser::bytesPerPixel() const {
+  // Skip features live until the decoder uses them; a few full-width tensors
+  // are alive at once in a block; the control copy doubles the encoder.
+  const UNetConfig& c = info().base;
+  double skips = 0.0;
+  for (int64_t l = 0; l < c.levels(); ++l)
+    skips += double(c.base_channels * c.channel_mults[l] * (c.res_blocks + 1)) / std::pow(4.0, l);
+  const double encoders = info().has_control ? 2.0 : 1.0;
+  const double working = 8.0 * c.base_channels * c.channel_mults[0];
+  const double hint = info().has_control ? 3.0 * info().control.hint_channels : 0.0;
+  return 4.0 * 1.5 * (encoders * skips + working + hint);
+}
+
+DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions& options) const {
+  auto missing = missingBuffers(frame);
+  if (!missing.empty()) {
+    std::string list;
+    for (const auto& m : missing) list += (list.empty() ? "" : ", ") + m;
+    throw std::invalid_argument("model needs buffers the input lacks: " + list);
+  }
+  if (options.samples < 1) throw std::invalid_argument("samples must be at least 1");
+  torch::NoGradGuard noGrad;
+  const ModelInfo& mi = info();
+  const tonemap::Curve curve = tonemap::curveFromName(mi.tonemap);
+
+  // Inputs in model space, full frame.
+  const torch::Tensor radiance = imageToTensor(frame.get("color"));
+  const torch::Tensor cond = modelSpaceFromTonemapped(tonemapRadiance(radiance, curve));
+  torch::Tensor aux;
+  if (!mi.input_buffers.empty()) {
+    std::vector<torch::Tensor> parts;
+    for (const auto& name : mi.input_buffers) parts.push_back(imageToTensor(frame.get(name)));
+    aux = normalizeAux(torch::cat(parts, 1), mi.input_buffers, curve);
+  }
+
+  const NoiseSchedule schedule = options.respacing.empty()
+                                     ? mi.samplingSchedule()
+                                     : respace(mi.trainingSchedule(), options.respacing);
+  const int64_t skip = options.skip >= 0 ? options.skip : defaultSkip(mi);
+  startStep(schedule, skip);  // validates skip against the step count
+  const int64_t steps = schedule.size() - skip;
+
+  const int64_t multiple = model_.model->sizeMultiple();
+  const int64_t tile = options.tile > 0
+                           ? options.tile
+                           : tileSizeForMemory(options.maxMemoryBytes, bytesPerPixel(), multiple);
+  const Tiler tiler(frame.height, frame.width, tile, options.overlap);
+  ConditionalDenoiser& net = *model_.model;
+  DenoiseFn fn = [&](const torch::Tensor& z_t, const torch::Tensor& t) {
+    return tiler.apply({z_t, cond, aux}, [&](const std::vector<torch::Tensor>& v) {
+      return net.predict(v[0], t, v[1], v[2]);
+    });
+  };
+
+  torch::Tensor sum, sumSquares;
+  for (int k = 0; k < options.samples; ++k) {
+    SamplerOptions so;
+    so.kind = options.sampler;
+    so.eta = options.eta;
+    so.skip_steps = skip;
+    so.seed = options.seed + static_cast<uint64_t>(k);
+    if (options.progress)
+      so.progress = [&, k](int64_t done, int64_t total) {
+        options.progress((k + double(done) / total) / options.samples);
+      };
+    torch::Tensor x0 = sample(schedule, mi.prediction, fn, cond, so);
+    torch::Tensor hdr = inverseTonemapRadiance(tonemappedFromModelSpace(x0), curve);
+    sum = k == 0 ? hdr.clone() : sum + hdr;
+    sumSquares = k == 0 ? hdr * hdr : sumSquares + hdr * hdr;
+  }
+
+  DenoiseResult result;
+  const double n = options.samples;
+  torch::Tensor mean = sum / n;
+  result.color = tensorToImage(mean);
+  if (options.samples > 1) {
+    torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
+    result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
+  }
+  result.steps = steps;
+  result.tileSize = std::min<int64_t>(tile, std::max(frame.width, frame.height));
+  result.tileCount = tiler.tiles().size();
+  return result;
+}
+
+}  // namespace dn
