@@ -30,7 +30,7 @@ def reference_metrics(ref, test):
         "psnr": 10 * np.log10(1 / np.mean((rt - tt) ** 2)),
         "ssim": structural_similarity(rt, tt, data_range=1.0, channel_axis=2, gaussian_weights=True,
                                       sigma=1.5, use_sample_covariance=False),
-        "smape": np.sum(np.abs(r - t)) / (np.sum(r) + np.sum(t) + 1e-2),
+        "smape": np.mean(np.abs(r - t)) / (np.mean(r) + np.mean(t) + 1e-2),
     }
 
 

@@ -19,7 +19,8 @@ double mse(const Image& reference, const Image& test);     // mean (x - y)^2 on 
 double relMse(const Image& reference, const Image& test);  // on non-negative linear radiance
 double psnr(const Image& reference, const Image& test);    // dB, Reinhard, peak 1
 double ssim(const Image& reference, const Image& test);    // Reinhard, 11x11 Gaussian, sigma 1.5
-// Paper's SMAPE over whole images: |A - B|_1 / (|A|_1 + |B|_1 + eps), on clamp(., 0, 6).
+// Paper's SMAPE over whole images: |A - B|_1 / (|A|_1 + |B|_1 + eps), on clamp(., 0, 6),
+// with |.|_1 the mean absolute value (as the SMAPE training loss), so eps is size-independent.
 double smape(const Image& reference, const Image& test);
 
 // Reinhard tonemap then sRGB encoding: the LDR image LDR-FLIP and previews see.
