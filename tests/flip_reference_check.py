@@ -8,7 +8,8 @@ For every pair, flip_cli computes
 and dumps the float RGB it read; flip-evaluator then runs on exactly that data.
 Means must agree within --tolerance (relative, default 1%).
 
-Pairs: testdata/pairs/NAME_<N>spp.exr against NAME_ref.exr, plus any given as
+Pairs: testdata/pairs/NAME_<N>spp.exr against NAME_ref.exr, scenegen frames
+(sppN_00.exr against gt_a.exr) below testdata, and any given as
 REFERENCE.exr:TEST.exr arguments. Fewer than --min-pairs pairs is a failure.
 Exit 0 when all agree, 1 otherwise, 77 (skipped) when flip_evaluator is not
 installed (pip install flip-evaluator).
@@ -31,12 +32,19 @@ except ImportError as e:  # CTest reports this as skipped
 
 
 def discover_pairs(testdata):
+    """pairs/NAME_<N>spp.exr with NAME_ref.exr, and scenegen frames anywhere
+    below testdata: sppN_00.exr with gt_a.exr in the same folder."""
     pairs = []
     for test in sorted(glob.glob(os.path.join(testdata, "pairs", "*_*spp.exr"))):
         match = re.match(r"(.*)_\d+spp\.exr$", test)
         reference = f"{match.group(1)}_ref.exr" if match else None
         if reference and os.path.exists(reference):
             pairs.append((reference, test))
+    for reference in sorted(glob.glob(os.path.join(testdata, "**", "gt_a.exr"), recursive=True)):
+        folder = os.path.dirname(reference)
+        tests = sorted(glob.glob(os.path.join(folder, "spp*_00.exr")))
+        if tests:
+            pairs.append((reference, tests[0]))
     return pairs
 
 
@@ -56,8 +64,11 @@ def reference_flip(reference, test, mode, parameters):
     return float(np.mean(error, dtype=np.float64)), time.perf_counter() - start, used
 
 
-def check_pair(cli, reference_path, test_path, work_dir, tolerance):
-    name = os.path.splitext(os.path.basename(test_path))[0]
+def check_pair(cli, reference_path, test_path, root, work_dir, tolerance):
+    relative = os.path.relpath(test_path, root)
+    if relative.startswith(".."):
+        relative = os.path.basename(test_path)
+    name = os.path.splitext(relative)[0].replace(os.sep, "_")
     prefix = os.path.join(work_dir, name)
     run = subprocess.run([cli, reference_path, test_path, "--dump", prefix],
                          capture_output=True, text=True)
@@ -104,9 +115,11 @@ def main():
     pairs += [tuple(p.split(":", 1)) for p in args.pairs]
     if len(pairs) < args.min_pairs:
         print(f"FAIL: {len(pairs)} render pairs found, at least {args.min_pairs} needed "
-              f"(testdata/pairs/NAME_<N>spp.exr with NAME_ref.exr)")
+              f"(testdata/pairs/NAME_<N>spp.exr with NAME_ref.exr, or scenegen frames)")
         return 1
-    failures = sum(not check_pair(args.cli, r, t, args.work_dir, args.tolerance) for r, t in pairs)
+    root = args.testdata or os.getcwd()  # pair names are paths relative to this
+    failures = sum(not check_pair(args.cli, r, t, root, args.work_dir, args.tolerance)
+                   for r, t in pairs)
     print(f"{len(pairs) - failures} of {len(pairs)} pairs agree within {args.tolerance:.0%}")
     return 1 if failures else 0
 
