@@ -37,7 +37,10 @@ std::vector<int> rgbChannels(const OIIO::ImageSpec& spec, const std::string& pat
     for (const char* name : {"R", "G", "B"}) {
       for (int c = 0; c < spec.nchannels; ++c) {
         const std::string& channel = spec.channelnames[c];
-        if (prefix.empty() ? channel == name : endsWith(channel, prefix + name)) {
+        const bool matches =
+            prefix.empty() ? channel == name
+                           : channel == prefix + name || endsWith(channel, "." + prefix + name);
+        if (matches) {
           found.push_back(c);
           break;
         }
