@@ -7,7 +7,8 @@
 // Reinhard-tonemapped (v / (1 + v), negatives as 0), sRGB-encoded images;
 // "hdrflip" is HDR-FLIP of the linear images. --dump writes the linear RGB
 // that was compared as PREFIX.reference.npy and PREFIX.test.npy (float32,
-// height x width x 3) so the reference sees exactly the same data.
+// height x width x 3) so the reference sees exactly the same data, and the
+// magma heatmap of the LDR-FLIP map as PREFIX.flip_magma.npy.
 #include <OpenImageIO/imageio.h>
 
 #include <chrono>
@@ -67,8 +68,8 @@ dn::Image readRgb(const std::string& path) {
 
 void writeNpy(const dn::Image& image, const std::string& path) {
   std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" +
-                       std::to_string(image.height) + ", " + std::to_string(image.width) +
-                       ", 3), }";
+                       std::to_string(image.height) + ", " + std::to_string(image.width) + ", " +
+                       std::to_string(image.channels) + "), }";
   header.append(63 - (10 + header.size()) % 64, ' ');  // total header size a multiple of 64
   header += '\n';
   const std::string temporary = path + ".tmp";
@@ -126,6 +127,7 @@ int main(int argc, char** argv) {
     auto start = std::chrono::steady_clock::now();
     const dn::Image ldr = dn::flip::ldrErrorMap(reinhardSrgb(reference), reinhardSrgb(test), ppd);
     const double ldrSeconds = secondsSince(start);
+    if (!dumpPrefix.empty()) writeNpy(dn::flip::magmaHeatmap(ldr), dumpPrefix + ".flip_magma.npy");
     dn::flip::HdrOptions options;
     options.pixelsPerDegree = ppd;
     start = std::chrono::steady_clock::now();
