@@ -150,7 +150,17 @@ std::shared_ptr<const FrameData> FrameData::load(const FrameRecord& record,
                                                  const SampleOptions& options) {
   auto data = std::make_shared<FrameData>();
   const fs::path dir(record.dir);
-  if (options.task == Task::Denoise) {
+  auto loadTarget = [&] {
+    if (fs::exists(dir / "gt_clean.exr")) return readImage((dir / "gt_clean.exr").string(), 3);
+    Image a = readImage((dir / "gt_a.exr").string(), 3),
+          b = readImage((dir / "gt_b.exr").string(), 3);
+    return average({&a, &b});
+  };
+  if (options.task == Task::Clean) {
+    data->target_ = loadTarget();
+    data->width_ = data->target_.width;
+    data->height_ = data->target_.height;
+  } else if (options.task == Task::Denoise) {
     int maxSpp = *std::max_element(options.spp.begin(), options.spp.end());
     if (record.stackSpp <= 0 || maxSpp > record.stacks * record.stackSpp)
       throw IoError(record.dir + ": " + std::to_string(maxSpp) + " spp needs " +
@@ -163,13 +173,7 @@ std::shared_ptr<const FrameData> FrameData::load(const FrameRecord& record,
       data->stackAux_.push_back(std::move(aux));
     }
     data->stackSpp_ = record.stackSpp;
-    if (fs::exists(dir / "gt_clean.exr")) {
-      data->target_ = readImage((dir / "gt_clean.exr").string(), 3);
-    } else {
-      Image a = readImage((dir / "gt_a.exr").string(), 3),
-            b = readImage((dir / "gt_b.exr").string(), 3);
-      data->target_ = average({&a, &b});
-    }
+    data->target_ = loadTarget();
     data->width_ = data->target_.width;
     data->height_ = data->target_.height;
   } else {
@@ -196,7 +200,11 @@ Sample FrameData::draw(std::mt19937_64& rng, const SampleOptions& options) const
   const int x0 = uniform(width_ - w + 1), y0 = uniform(height_ - h + 1);
 
   Sample s;
-  if (options.task == Task::Denoise) {
+  if (options.task == Task::Clean) {
+    s.target = crop(target_, x0, y0, w, h);
+    s.color = s.target;
+    s.aux = Image(w, h, 0);
+  } else if (options.task == Task::Denoise) {
     s.spp = options.spp[uniform(static_cast<int>(options.spp.size()))];
     std::vector<int> order(stackColor_.size());
     std::iota(order.begin(), order.end(), 0);

@@ -34,6 +34,7 @@ std::vector<FrameRecord> scanDataset(const std::string& root, const std::string&
 enum class Task {
   Denoise,  // low-spp average + its aux buffers -> clean target (gt_clean, else mean of gt_a/gt_b)
   Cleanse,  // one ground truth + its aux buffers -> the other ground truth (swapped at random)
+  Clean,    // the clean target alone (as both color and target): pretraining images
 };
 
 struct SampleOptions {

@@ -1,0 +1,353 @@
+// dntrain: trains the diffusion denoiser.
+//   dntrain base    --data DIR --photos DIR --out base.dnm     pretrain the prior
+//   dntrain control --data DIR --base base.dnm --out model.dnm  train the Control Module
+#include <fmt/format.h>
+#include <torch/torch.h>
+
+#include <ATen/CPUGeneratorImpl.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+
+#include "common/cli.h"
+#include "dn/buffer_io.h"
+#include "dn/control_module.h"
+#include "dn/model_inputs.h"
+#include "dn/sampler.h"
+#include "dn/trainer.h"
+#include "dn/training_data.h"
+
+namespace fs = std::filesystem;
+using namespace dn;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+const char* kUsage =
+    R"(usage: dntrain base    --data DIR [--photos DIR ...] --out base.dnm [options]
+       dntrain control --data DIR --base base.dnm --out model.dnm [options]
+
+base     pretrains the pixel-space prior on clean images (the data set's ground
+         truths and photographs) conditioned on a degraded copy of each.
+control  freezes a pretrained prior and trains the Control Module on the data
+         set's low-spp renders and feature buffers against the clean targets.
+
+options:
+  --data DIR            data set root (docs/dataset.md); training uses split 'train'
+  --photos DIR          folder of photographs for the prior (repeatable)
+  --base FILE           pretrained prior (control)
+  --out FILE            model file written at the end (EMA weights)
+  --aux LIST|default|none  control inputs (default: Denoising Data + diffuse/glossy/
+                        transmission light passes); none = the radiance-only ablation
+  --steps N             total optimizer steps (default 2000); raise it and --resume to extend
+  --batch N             batch size (default 8)        --crop N  crop size (default 64)
+  --spp LIST            input sample counts (default 4,16,64)
+  --lr X                learning rate (default 2e-4)  --halve-every N  halve lr every N steps
+  --ema X               EMA decay (default 0.999)     --seed N  (default 1)
+  --prediction eps|v    network output (default eps)
+  --base-channels N --res-blocks N   prior size (base only; default 32, 2)
+  --default-skip S      skip stored in the model for dndenoise (default: 18 control, 0 base)
+  --val-every N         validation every N steps (default 250; 0 disables)
+  --log FILE            JSON-lines log (default: OUT.log.jsonl)
+  --checkpoint FILE     checkpoint path (default: OUT.ckpt)
+  --checkpoint-minutes M  checkpoint interval (default 5)
+  --resume              continue from the checkpoint if it exists (same data order)
+  --threads N           CPU threads for the network and the loader
+  -h, --help
+Ctrl-C (SIGINT) or SIGTERM saves a checkpoint and exits with code 130.
+)";
+
+std::atomic<bool> stopRequested{false};
+extern "C" void onSignal(int) { stopRequested = true; }
+
+struct Options {
+  std::string mode, data, base, out, log, checkpoint;
+  std::vector<std::string> photos;
+  std::string aux = "default", prediction = "eps";
+  std::vector<int> spp = {4, 16, 64};
+  int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 32,
+          resBlocks = 2, defaultSkip = -1;
+  double lr = 2e-4, ema = 0.999, checkpointMinutes = 5;
+  uint64_t seed = 1;
+  int threads = 0;
+  bool resume = false;
+};
+
+Options parseArgs(int argc, char** argv) {
+  cli::Args args(argc, argv);
+  Options o;
+  while (!args.done()) {
+    if (args.flag("-h", "--help")) {
+      std::fputs(kUsage, stdout);
+      std::exit(cli::kExitOk);
+    } else if (args.flag("--data"))
+      o.data = args.value("--data");
+    else if (args.flag("--photos"))
+      o.photos.push_back(args.value("--photos"));
+    else if (args.flag("--base"))
+      o.base = args.value("--base");
+    else if (args.flag("--out"))
+      o.out = args.value("--out");
+    else if (args.flag("--aux"))
+      o.aux = args.value("--aux");
+    else if (args.flag("--steps"))
+      o.steps = args.intValue("--steps");
+    else if (args.flag("--batch"))
+      o.batch = args.intValue("--batch");
+    else if (args.flag("--crop"))
+      o.crop = args.intValue("--crop");
+    else if (args.flag("--spp")) {
+      o.spp.clear();
+      for (const auto& s : cli::splitList(args.value("--spp")))
+        o.spp.push_back(cli::Args::toInt("--spp", s));
+    } else if (args.flag("--lr"))
+      o.lr = args.doubleValue("--lr");
+    else if (args.flag("--halve-every"))
+      o.halveEvery = args.intValue("--halve-every");
+    else if (args.flag("--ema"))
+      o.ema = args.doubleValue("--ema");
+    else if (args.flag("--seed"))
+      o.seed = static_cast<uint64_t>(args.intValue("--seed"));
+    else if (args.flag("--prediction"))
+      o.prediction = args.value("--prediction");
+    else if (args.flag("--base-channels"))
+      o.baseChannels = args.intValue("--base-channels");
+    else if (args.flag("--res-blocks"))
+      o.resBlocks = args.intValue("--res-blocks");
+    else if (args.flag("--default-skip"))
+      o.defaultSkip = args.intValue("--default-skip");
+    else if (args.flag("--val-every"))
+      o.valEvery = args.intValue("--val-every");
+    else if (args.flag("--log"))
+      o.log = args.value("--log");
+    else if (args.flag("--checkpoint"))
+      o.checkpoint = args.value("--checkpoint");
+    else if (args.flag("--checkpoint-minutes"))
+      o.checkpointMinutes = args.doubleValue("--checkpoint-minutes");
+    else if (args.flag("--resume"))
+      o.resume = true;
+    else if (args.flag("--threads"))
+      o.threads = args.intValue("--threads");
+    else if (args.peek().size() > 1 && args.peek()[0] == '-')
+      throw cli::UsageError("unknown option '" + args.peek() + "' (see --help)");
+    else if (o.mode.empty())
+      o.mode = args.positional();
+    else
+      throw cli::UsageError("unexpected argument '" + args.peek() + "'");
+  }
+  if (o.mode != "base" && o.mode != "control")
+    throw cli::UsageError("first argument must be base or control (see --help)");
+  if (o.out.empty()) throw cli::UsageError("--out is required");
+  if (o.mode == "control" && (o.base.empty() || o.data.empty()))
+    throw cli::UsageError("control needs --base and --data");
+  if (o.mode == "base" && o.data.empty() && o.photos.empty())
+    throw cli::UsageError("base needs --data and/or --photos");
+  if (o.batch < 1 || o.crop < 16 || o.steps < 1)
+    throw cli::UsageError("--batch, --crop and --steps must be positive (crop >= 16)");
+  if (o.prediction != "eps" && o.prediction != "v")
+    throw cli::UsageError("--prediction must be eps or v");
+  if (o.log.empty()) o.log = o.out + ".log.jsonl";
+  if (o.checkpoint.empty()) o.checkpoint = o.out + ".ckpt";
+  return o;
+}
+
+std::vector<std::string> auxBuffers(const std::string& spec) {
+  if (spec == "default") return defaultAuxBuffers();
+  if (spec == "none") return {};
+  auto list = cli::splitList(spec);
+  auxChannelCount(list);  // validates the names
+  return list;
+}
+
+// The model to train, described by its ModelInfo (training options go in notes,
+// so a checkpoint only resumes the run it belongs to).
+std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Options& o) {
+  ModelInfo info;
+  std::shared_ptr<ConditionalDenoiser> model;
+  if (o.mode == "base") {
+    info.base.base_channels = o.baseChannels;
+    info.base.res_blocks = o.resBlocks;
+    info.has_control = false;
+    info.prediction = predictionFromName(o.prediction == "eps" ? "epsilon" : "v");
+    info.notes["default_skip"] = std::to_string(std::max<int64_t>(0, o.defaultSkip));
+  } else {
+    const LoadedModel base = loadModelFile(o.base);
+    if (base.info.has_control) throw IoError(o.base + ": is a controlled model, not a base prior");
+    info = base.info;
+    info.has_control = true;
+    info.input_buffers = auxBuffers(o.aux);
+    info.control.aux_channels = auxChannelCount(info.input_buffers);
+    info.notes["default_skip"] = std::to_string(o.defaultSkip >= 0 ? o.defaultSkip : 18);
+    info.notes["base_model"] = fs::path(o.base).filename().string();
+    model = std::make_shared<ControlledDenoiser>(base.prior(), info.control);
+  }
+  info.notes["train.mode"] = o.mode;
+  info.notes["train.batch"] = std::to_string(o.batch);
+  info.notes["train.crop"] = std::to_string(o.crop);
+  info.notes["train.seed"] = std::to_string(o.seed);
+  if (!model) model = buildDenoiser(info);
+  return {info, model};
+}
+
+// Produces the training batches of one mode, deterministically from (seed, step).
+class BatchSource {
+ public:
+  BatchSource(const Options& o, const ModelInfo& info, const std::string& split, int64_t startStep)
+      : o_(o), info_(info), curve_(tonemap::curveFromName(info.tonemap)) {
+    if (!o.photos.empty()) photos_ = std::make_unique<PhotoSource>(o.photos);
+    if (!o.data.empty()) {
+      data::SampleOptions so;
+      so.task = o.mode == "base" ? data::Task::Clean : data::Task::Denoise;
+      so.spp = o.spp;
+      so.aux = info.input_buffers;
+      so.crop = static_cast<int>(o.crop);
+      data::LoaderOptions lo;
+      lo.batchSize = static_cast<int>(renderedPerBatch());
+      lo.seed = o.seed;
+      lo.threads = 2;
+      loader_ = std::make_unique<data::Loader>(
+          data::scanDataset(o.data, split), so, lo,
+          static_cast<std::uint64_t>(startStep * renderedPerBatch()));
+    }
+  }
+
+  TrainBatch batch(int64_t step) {
+    if (o_.mode == "control") return toTrainBatch(loader_->next(), info_.input_buffers, curve_);
+    // base: clean images from renders and photographs, conditioned on a degraded copy.
+    auto generator =
+        at::detail::createCPUGenerator(o_.seed * 1000003 + static_cast<uint64_t>(step));
+    std::vector<torch::Tensor> clean;
+    if (loader_) clean.push_back(targetTensor(loader_->next()));
+    if (photos_) clean.push_back(photos_->draw(o_.batch - renderedPerBatch(), o_.crop, generator));
+    torch::Tensor x = torch::cat(clean, 0);
+    return {tonemapRadiance(degrade(x, generator), curve_), {}, tonemapRadiance(x, curve_)};
+  }
+
+ private:
+  int64_t renderedPerBatch() const {
+    if (o_.data.empty()) return 0;
+    return o_.mode == "base" && !o_.photos.empty() ? o_.batch / 2 : o_.batch;
+  }
+  const Options& o_;
+  const ModelInfo& info_;
+  tonemap::Curve curve_;
+  std::unique_ptr<PhotoSource> photos_;
+  std::unique_ptr<data::Loader> loader_;
+};
+
+// Denoises a fixed validation batch with the sampler dndenoise uses; L1 on
+// [0, 6] radiance and PSNR on Reinhard, for the result and for the input.
+std::string validate(Trainer& trainer, const TrainBatch& val, tonemap::Curve curve) {
+  const ModelInfo& info = trainer.info();
+  SamplerOptions so;
+  so.seed = 7;
+  so.skip_steps = std::stoll(info.notes.at("default_skip"));
+  torch::Tensor out = denoiseTonemapped(*trainer.model(), info.samplingSchedule(), info.prediction,
+                                        val.noisy, val.aux, so);
+  auto hdr = [&](const torch::Tensor& t) { return inverseTonemapRadiance(t, curve); };
+  auto l1 = [](const torch::Tensor& a, const torch::Tensor& b) {
+    return (a - b).abs().mean().item<double>();
+  };
+  auto psnr = [](const torch::Tensor& a, const torch::Tensor& b) {
+    auto mse = (a / (1 + a) - b / (1 + b)).pow(2).mean().item<double>();
+    return 10 * std::log10(1 / mse);
+  };
+  torch::Tensor ref = hdr(val.target), result = hdr(out), input = hdr(val.noisy);
+  return fmt::format(
+      "\"val_loss\": {:.6g}, \"val_l1\": {:.6g}, \"val_psnr\": {:.4f}, \"input_l1\": {:.6g}, "
+      "\"input_psnr\": {:.4f}",
+      trainer.evaluate(val, 11), l1(result, ref), psnr(result, ref), l1(input, ref),
+      psnr(input, ref));
+}
+
+int run(const Options& o) {
+  if (o.threads > 0) torch::set_num_threads(o.threads);
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  auto [info, model] = buildModel(o);
+  TrainerOptions to;
+  to.learning_rate = o.lr;
+  to.halve_every = o.halveEvery;
+  to.ema_decay = o.ema;
+  to.seed = o.seed;
+  Trainer trainer(model, info, to);
+  if (o.resume && fs::exists(o.checkpoint)) {
+    trainer.loadCheckpoint(o.checkpoint);
+    fmt::print(stderr, "dntrain: resumed {} at step {}\n", o.checkpoint, trainer.stepCount());
+  }
+
+  BatchSource source(o, trainer.info(), "train", trainer.stepCount());
+  // A fixed validation batch: from the 'val' split when there is one.
+  std::optional<TrainBatch> val;
+  if (o.valEvery > 0) {
+    Options vo = o;
+    vo.seed = 12345;
+    vo.batch = std::min<int64_t>(o.batch, 4);
+    const bool hasVal = !o.data.empty() && fs::is_directory(fs::path(o.data) / "val");
+    val = BatchSource(vo, trainer.info(), hasVal ? "val" : "train", 0).batch(0);
+  }
+
+  std::ofstream log(o.log, std::ios::app);
+  if (!log) throw IoError(o.log + ": cannot open the log for writing");
+  const auto start = Clock::now();
+  auto lastCheckpoint = start;
+  const int64_t firstStep = trainer.stepCount();
+  fmt::print(
+      stderr, "dntrain {}: {} trainable parameters, steps {} -> {}\n", o.mode,
+      [&] {
+        int64_t n = 0;
+        for (const auto& p : model->parameters()) n += p.requires_grad() ? p.numel() : 0;
+        return n;
+      }(),
+      firstStep, o.steps);
+
+  while (trainer.stepCount() < o.steps && !stopRequested) {
+    TrainBatch batch = source.batch(trainer.stepCount());
+    StepStats stats = trainer.step(batch);
+    const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+    const double rate = (stats.step - firstStep) * o.batch / elapsed;
+    const double eta = (o.steps - stats.step) * o.batch / std::max(rate, 1e-9);
+    log << fmt::format(
+        "{{\"step\": {}, \"loss\": {:.6g}, \"lr\": {:.3g}, \"samples_per_s\": {:.3f}, "
+        "\"elapsed_s\": {:.1f}",
+        stats.step, stats.loss, stats.learning_rate, rate, elapsed);
+    if (val && (stats.step % o.valEvery == 0 || stats.step == o.steps))
+      log << ", " << validate(trainer, *val, tonemap::curveFromName(info.tonemap));
+    log << "}\n" << std::flush;
+    fmt::print(stderr, "\rdntrain {}: step {}/{}  loss {:.4f}  {:.1f} samples/s  ETA {:.0f} min   ",
+               o.mode, stats.step, o.steps, stats.loss, rate, eta / 60);
+    if (std::chrono::duration<double>(Clock::now() - lastCheckpoint).count() >
+        60 * o.checkpointMinutes) {
+      trainer.saveCheckpoint(o.checkpoint);
+      lastCheckpoint = Clock::now();
+    }
+  }
+  fmt::print(stderr, "\n");
+  trainer.saveCheckpoint(o.checkpoint);
+  if (stopRequested) {
+    fmt::print(stderr,
+               "dntrain: interrupted at step {}; checkpoint {} saved (continue with --resume)\n",
+               trainer.stepCount(), o.checkpoint);
+    return 130;
+  }
+  trainer.saveEmaModel(o.out);
+  fmt::print(stderr, "dntrain: wrote {} after {} steps\n", o.out, trainer.stepCount());
+  return cli::kExitOk;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(parseArgs(argc, argv));
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "dntrain: {}\n", e.what());
+  }
+  return cli::kExitError;
+}
