@@ -1,0 +1,209 @@
+#!/usr/bin/env python3
+"""Render the training data set: one Blender process per scene (see docs/dataset.md).
+
+  python3 scenegen/make_dataset.py --out DATA --scenes 5650 --first-seed 0 \
+      --res 256 --spp 4 --stacks 16 --gt-spp 4096 --frames 8 --shard 0/4 --threads 2
+
+Scenes are seeds first_seed .. first_seed+scenes-1; shard i/n takes every n-th
+seed starting at the i-th, so n machines (or `make -j`) can share one output
+folder. Finished frames are skipped, so an interrupted run resumes where it
+stopped. manifest.json is rebuilt from what is on disk at the end of every run.
+"""
+
+import argparse
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+GENERATE = os.path.join(HERE, "generate.py")
+MANIFEST_VERSION = 1
+TEST_FRACTION = 0.05
+VAL_FRACTION = 0.03
+
+
+def split_of(seed):
+    """Deterministic split by scene: ~5% test, ~3% val, the rest train."""
+    u = int(hashlib.sha256(("split:%d" % seed).encode()).hexdigest()[:8], 16) / 2.0 ** 32
+    if u < TEST_FRACTION:
+        return "test"
+    if u < TEST_FRACTION + VAL_FRACTION:
+        return "val"
+    return "train"
+
+
+def scene_dir(out, seed):
+    return os.path.join(out, split_of(seed), "scene_%06d" % seed)
+
+
+def parse_shard(text):
+    try:
+        i, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError("--shard wants i/n, e.g. 0/4")
+    if n < 1 or not 0 <= i < n:
+        raise argparse.ArgumentTypeError("--shard i/n needs 0 <= i < n")
+    return i, n
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="output folder (shared by all shards)")
+    p.add_argument("--scenes", type=int, default=10, help="number of scenes (seeds)")
+    p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--res", type=int, default=128)
+    p.add_argument("--spp", type=int, default=4, help="samples per pixel of each noisy stack")
+    p.add_argument("--stacks", type=int, default=16, help="independent noisy renders per frame")
+    p.add_argument("--gt-spp", type=int, default=1024)
+    p.add_argument("--gt-depth", choices=["16", "32"], default="16", help="EXR bits of the GT renders")
+    p.add_argument("--frames", type=int, default=8)
+    p.add_argument("--shard", type=parse_shard, default=(0, 1), help="i/n: render every n-th scene from the i-th")
+    p.add_argument("--threads", type=int, default=2, help="Cycles threads per Blender process")
+    p.add_argument("--blender", default="blender")
+    p.add_argument("--manifest-only", action="store_true", help="only rebuild manifest.json from disk")
+    args = p.parse_args(argv)
+    if min(args.scenes, args.res, args.spp, args.stacks, args.gt_spp, args.frames, args.threads) < 1:
+        p.error("--scenes, --res, --spp, --stacks, --gt-spp, --frames and --threads must be positive")
+    return args
+
+
+def render_settings(args):
+    return {"res": args.res, "spp": args.spp, "stacks": args.stacks, "gt_spp": args.gt_spp,
+            "gt_depth": args.gt_depth, "frames": args.frames}
+
+
+def read_json(path):
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def frame_done(sdir, k, settings):
+    """A frame counts only when meta.json (written last) and every file it lists exist."""
+    meta = read_json(os.path.join(sdir, "frame_%d" % k, "meta.json"))
+    if meta is None:
+        return False
+    mismatch = [key for key in ("res", "spp", "stacks", "gt_spp", "gt_depth") if meta.get(key) != settings[key]]
+    if mismatch:
+        sys.exit("make_dataset.py: %s/frame_%d was made with other settings (%s); use another --out"
+                 % (sdir, k, ", ".join("%s=%s" % (m, meta.get(m)) for m in mismatch)))
+    return all(os.path.exists(os.path.join(sdir, "frame_%d" % k, f)) for f in meta["files"])
+
+
+def blender_version(blender):
+    try:
+        out = subprocess.run([blender, "--version"], capture_output=True, text=True, timeout=60).stdout
+        return out.splitlines()[0].strip() if out else "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def render_scene(args, seed, todo, log_dir):
+    sdir = scene_dir(args.out, seed)
+    cmd = [args.blender, "-b", "--factory-startup", "--python", GENERATE, "--",
+           "--seed", str(seed), "--scene-dir", sdir, "--res", str(args.res), "--spp", str(args.spp),
+           "--stacks", str(args.stacks), "--gt-spp", str(args.gt_spp), "--gt-depth", args.gt_depth,
+           "--frames", str(args.frames), "--only-frames", ",".join(map(str, todo)),
+           "--threads", str(args.threads)]
+    log_path = os.path.join(log_dir, "scene_%06d.log" % seed)
+    with open(log_path, "w") as log:
+        rc = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT)
+    if rc != 0:
+        sys.exit("make_dataset.py: Blender failed on seed %d (exit %d); see %s" % (seed, rc, log_path))
+
+
+def format_seconds(s):
+    s = int(s)
+    return "%dh%02dm%02ds" % (s // 3600, s % 3600 // 60, s % 60) if s >= 3600 else "%dm%02ds" % (s // 60, s % 60)
+
+
+def write_manifest(args, bversion):
+    """Scan every seed of the range (all shards) and describe the frames that are finished."""
+    settings = render_settings(args)
+    scenes = []
+    counts = {"train": 0, "val": 0, "test": 0}
+    for seed in range(args.first_seed, args.first_seed + args.scenes):
+        sdir = scene_dir(args.out, seed)
+        frames = []
+        for k in range(args.frames):
+            if not frame_done(sdir, k, settings):
+                continue
+            meta = read_json(os.path.join(sdir, "frame_%d" % k, "meta.json"))
+            renders = meta["render_seconds"]
+            stacks = [v for n, v in renders.items() if n.startswith("spp") and v is not None]
+            gts = [v for n, v in renders.items() if n.startswith("gt") and v is not None]
+            frames.append({"frame": k, "path": os.path.relpath(os.path.join(sdir, "frame_%d" % k), args.out),
+                           "files": meta["files"], "render_seeds": meta["render_seeds"],
+                           "render_seconds": renders, "stack_seconds_total": round(sum(stacks), 3),
+                           "gt_seconds_total": round(sum(gts), 3), "frame_seconds": meta["frame_seconds"],
+                           "exposure_scale": meta["exposure_scale"], "blender_version": meta["blender_version"],
+                           "generator_version": meta["generator_version"]})
+        if frames:
+            counts[split_of(seed)] += 1
+            scenes.append({"seed": seed, "split": split_of(seed),
+                           "path": os.path.relpath(sdir, args.out), "frames": frames,
+                           "complete": len(frames) == args.frames})
+    versions = sorted({f["generator_version"] for s in scenes for f in s["frames"]})
+    manifest = {
+        "manifest_version": MANIFEST_VERSION, "generator_versions": versions,
+        "blender_version": bversion, "settings": settings,
+        "seeds": {"first": args.first_seed, "count": args.scenes},
+        "split_rule": {"test": TEST_FRACTION, "val": VAL_FRACTION,
+                       "how": "u = first 32 bits of sha256('split:<seed>') / 2^32; test if u<0.05, val if u<0.08"},
+        "scene_counts": counts, "frame_count": sum(len(s["frames"]) for s in scenes),
+        "scenes": scenes,
+    }
+    path = os.path.join(args.out, "manifest.json")
+    tmp = "%s.tmp%d" % (path, os.getpid())
+    with open(tmp, "w") as f:
+        json.dump(manifest, f, indent=1)
+    os.replace(tmp, path)
+    return manifest
+
+
+def main(argv):
+    args = parse_args(argv)
+    os.makedirs(args.out, exist_ok=True)
+    bversion = blender_version(args.blender)
+    if args.manifest_only:
+        m = write_manifest(args, bversion)
+        print("manifest: %d frames in %d scenes" % (m["frame_count"], len(m["scenes"])), file=sys.stderr)
+        return 0
+    if bversion == "unknown":
+        sys.exit("make_dataset.py: cannot run '%s --version'" % args.blender)
+    log_dir = os.path.join(args.out, "logs")
+    os.makedirs(log_dir, exist_ok=True)
+    settings = render_settings(args)
+    shard_i, shard_n = args.shard
+    seeds = [s for j, s in enumerate(range(args.first_seed, args.first_seed + args.scenes)) if j % shard_n == shard_i]
+    work = [(s, [k for k in range(args.frames) if not frame_done(scene_dir(args.out, s), k, settings)]) for s in seeds]
+    work = [(s, todo) for s, todo in work if todo]
+    total = sum(len(todo) for _, todo in work)
+    skipped = len(seeds) * args.frames - total
+    print("make_dataset.py: shard %d/%d: %d scenes, %d frames to render, %d already done"
+          % (shard_i, shard_n, len(seeds), total, skipped), file=sys.stderr, flush=True)
+    start = time.time()
+    done = 0
+    for n, (seed, todo) in enumerate(work):
+        render_scene(args, seed, todo, log_dir)
+        done += len(todo)
+        elapsed = time.time() - start
+        rate = done / elapsed
+        eta = (total - done) / rate if rate > 0 else 0
+        print("[%d/%d scenes, %d/%d frames] seed %d (%s) %.1fs/frame, %.0f frames/h, elapsed %s, ETA %s"
+              % (n + 1, len(work), done, total, seed, split_of(seed), elapsed / done, 3600 * rate,
+                 format_seconds(elapsed), format_seconds(eta)), file=sys.stderr, flush=True)
+    m = write_manifest(args, bversion)
+    print("make_dataset.py: manifest lists %d finished frames in %d scenes (%s)"
+          % (m["frame_count"], len(m["scenes"]), ", ".join("%s %d" % kv for kv in m["scene_counts"].items())),
+          file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
