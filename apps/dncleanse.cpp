@@ -1,0 +1,531 @@
+// dncleanse: the Noise2Noise ground-truth cleanser (and the Isik baseline denoiser).
+//   dncleanse train --data DIR --out cleanser.pt [options]
+//   dncleanse apply --model cleanser.pt --data DIR [--force]
+//   dncleanse IN.exr -o OUT.exr --model M
+#include <fmt/format.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+#include <unistd.h>
+
+#include "common/cli.h"
+#include "dn/buffer_io.h"
+#include "dn/dataset.h"
+#include "dn/kernel_net.h"
+#include "dn/kernel_trainer.h"
+#include "dn/model_file.h"
+#include "dn/model_inputs.h"
+
+namespace fs = std::filesystem;
+using namespace dn;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+const char* kUsage = R"(usage: dncleanse train --data DIR --out MODEL [options]
+       dncleanse apply --model MODEL --data DIR [--force] [--source a|b]
+       dncleanse IN.exr -o OUT.exr --model MODEL [--layer NAME] [--rgb]
+
+A kernel-predicting network (Isik et al. 2021, no temporal terms) trained with
+SMAPE. --task cleanse (default) learns ground truth -> the other ground truth
+(Noise2Noise), and `apply` writes gt_clean.exr beside every frame of a data set;
+--task denoise learns low-spp input -> clean target (the "Isik" baseline).
+
+train options:
+  --data DIR             data set (docs/dataset.md); frames of --train-split
+  --out MODEL            model file (EMA weights), written atomically
+  --steps N              total steps (default 20000)
+  --batch B              samples per step (default 8)
+  --crop C               square crop size (default 64)
+  --lr X                 Adam learning rate (default 1e-3)
+  --halve-every N        halve the learning rate every N steps (default 0: never)
+  --seed S               data order and initial weights (default 1)
+  --task cleanse|denoise (default cleanse)
+  --spp LIST             denoise input sample counts (default 4,16,64)
+  --buffers LIST         aux buffers (default: the standard Cycles set, see docs)
+  --widths LIST          UNet widths per level (default 24,32,48)
+  --dilations LIST       one kernel iteration per dilation (default 1,2,4)
+  --feature-dims N       affinity features per iteration (default 8)
+  --val-every N          validation SMAPE every N steps (default 0: never)
+  --val-samples N        validation crops (default 32)
+  --train-split NAME     (default train)    --val-split NAME  (default val)
+  --log FILE             JSON lines log (default MODEL.log.jsonl)
+  --checkpoint FILE      (default MODEL.ckpt), written every --checkpoint-minutes
+  --checkpoint-minutes M (default 5) and on SIGINT/SIGTERM
+  --resume               continue the run in --checkpoint (same data order,
+                         optimizer state and step); --steps may be raised
+  --threads N            compute threads (default 2)
+apply options:
+  --force                recompute frames that already have gt_clean.exr
+  --source a|b           which ground truth to cleanse (default a)
+single-file options:
+  -o OUT                 output file: the input's layers plus the result layer
+  --layer NAME           result layer (default Cleansed or Denoised, by the model's task)
+  --rgb                  write a plain RGB file instead
+exit codes: 0 ok, 1 bad input or arguments, 130/143 training stopped by SIGINT/SIGTERM
+            (checkpoint written; continue with --resume)
+)";
+
+volatile std::sig_atomic_t g_stop_signal = 0;
+extern "C" void onStopSignal(int signal) { g_stop_signal = signal; }
+
+std::vector<int64_t> toInt64s(const std::string& option, const std::string& text) {
+  std::vector<int64_t> out;
+  for (const auto& item : cli::splitList(text)) out.push_back(cli::Args::toInt(option, item));
+  if (out.empty()) throw cli::UsageError(option + " needs a list");
+  return out;
+}
+
+std::string joined(const std::vector<std::string>& items) {
+  std::string out;
+  for (size_t i = 0; i < items.size(); ++i) out += (i ? "," : "") + items[i];
+  return out;
+}
+
+std::string duration(double seconds) {
+  const int s = int(seconds);
+  if (s >= 3600) return fmt::format("{}h{:02d}m", s / 3600, s % 3600 / 60);
+  if (s >= 60) return fmt::format("{}m{:02d}s", s / 60, s % 60);
+  return fmt::format("{}s", s);
+}
+
+// ---------------------------------------------------------------- train
+
+struct TrainOptions {
+  std::string data, out, log, checkpoint;
+  int steps = 20000, batch = 8, crop = 64, halve_every = 0, threads = 2;
+  int val_every = 0, val_samples = 32;
+  double lr = 1e-3, checkpoint_minutes = 5;
+  std::string seed = "1", task = "cleanse", spp = "4,16,64";
+  std::string train_split = "train", val_split = "val";
+  bool resume = false;
+  KernelNetConfig net;
+  std::set<std::string> given;  // options set on the command line
+};
+
+// The settings that define a run: stored in checkpoints, checked on --resume.
+std::map<std::string, std::string> runSettings(const TrainOptions& o) {
+  return {{"data", o.data},
+          {"batch", std::to_string(o.batch)},
+          {"crop", std::to_string(o.crop)},
+          {"lr", fmt::format("{}", o.lr)},
+          {"halve_every", std::to_string(o.halve_every)},
+          {"seed", o.seed},
+          {"task", o.task},
+          {"spp", o.spp},
+          {"train_split", o.train_split}};
+}
+
+// The command-line option behind each run setting.
+const std::map<std::string, std::string> kSettingOption = {{"data", "--data"},
+                                                           {"batch", "--batch"},
+                                                           {"crop", "--crop"},
+                                                           {"lr", "--lr"},
+                                                           {"halve_every", "--halve-every"},
+                                                           {"seed", "--seed"},
+                                                           {"task", "--task"},
+                                                           {"spp", "--spp"},
+                                                           {"train_split", "--train-split"}};
+
+TrainOptions parseTrain(cli::Args& args) {
+  TrainOptions o;
+  o.net.input_buffers = defaultAuxBuffers();
+  while (!args.done()) {
+    const std::string arg = args.peek();
+    auto take = [&](const char* name) {
+      if (!args.flag(name)) return false;
+      o.given.insert(name);
+      return true;
+    };
+    if (take("--data"))
+      o.data = args.value("--data");
+    else if (take("--out"))
+      o.out = args.value("--out");
+    else if (take("--log"))
+      o.log = args.value("--log");
+    else if (take("--checkpoint"))
+      o.checkpoint = args.value("--checkpoint");
+    else if (take("--steps"))
+      o.steps = args.intValue("--steps");
+    else if (take("--batch"))
+      o.batch = args.intValue("--batch");
+    else if (take("--crop"))
+      o.crop = args.intValue("--crop");
+    else if (take("--lr"))
+      o.lr = args.doubleValue("--lr");
+    else if (take("--halve-every"))
+      o.halve_every = args.intValue("--halve-every");
+    else if (take("--threads"))
+      o.threads = args.intValue("--threads");
+    else if (take("--seed"))
+      o.seed = std::to_string(args.intValue("--seed"));
+    else if (take("--task"))
+      o.task = args.value("--task");
+    else if (take("--spp"))
+      o.spp = args.value("--spp");
+    else if (take("--val-every"))
+      o.val_every = args.intValue("--val-every");
+    else if (take("--val-samples"))
+      o.val_samples = args.intValue("--val-samples");
+    else if (take("--train-split"))
+      o.train_split = args.value("--train-split");
+    else if (take("--val-split"))
+      o.val_split = args.value("--val-split");
+    else if (take("--checkpoint-minutes"))
+      o.checkpoint_minutes = args.doubleValue("--checkpoint-minutes");
+    else if (take("--resume"))
+      o.resume = true;
+    else if (take("--buffers"))
+      o.net.input_buffers = cli::splitList(args.value("--buffers"));
+    else if (take("--widths"))
+      o.net.widths = toInt64s("--widths", args.value("--widths"));
+    else if (take("--dilations"))
+      o.net.dilations = toInt64s("--dilations", args.value("--dilations"));
+    else if (take("--feature-dims"))
+      o.net.feature_dims = args.intValue("--feature-dims");
+    else
+      throw cli::UsageError("train: unknown argument '" + arg + "'");
+  }
+  if (o.out.empty()) throw cli::UsageError("train needs --out MODEL");
+  if (o.data.empty() && !o.resume) throw cli::UsageError("train needs --data DIR");
+  const auto out_dir = fs::absolute(o.out).parent_path();
+  if (!fs::is_directory(out_dir))
+    throw IoError(o.out + ": the folder " + out_dir.string() + " does not exist");
+  if (o.log.empty()) o.log = o.out + ".log.jsonl";
+  if (o.checkpoint.empty()) o.checkpoint = o.out + ".ckpt";
+  if (o.steps < 1 || o.batch < 1 || o.crop < 8 || o.threads < 1 || o.val_every < 0 ||
+      o.val_samples < 1 || o.halve_every < 0 || !(o.lr > 0) || !(o.checkpoint_minutes > 0))
+    throw cli::UsageError(
+        "train: --steps, --batch, --threads, --val-samples must be >= 1, --crop >= 8, --lr > 0");
+  try {
+    kernelTaskFromName(o.task);
+    o.net.validate();
+  } catch (const std::invalid_argument& error) {
+    throw cli::UsageError(std::string("train: ") + error.what());
+  }
+  return o;
+}
+
+// --resume: the run's settings and network come from the checkpoint; options
+// given again must agree with it.
+KernelModelInfo adoptCheckpoint(TrainOptions& o) {
+  if (!fs::exists(o.checkpoint))
+    throw IoError(o.checkpoint + ": no checkpoint to resume (run without --resume first)");
+  auto header = readKernelCheckpointHeader(o.checkpoint);
+  const auto mine = runSettings(o);
+  for (const auto& [key, option] : kSettingOption) {
+    auto stored = header.run_state.find(key);
+    if (stored == header.run_state.end())
+      throw ModelError(o.checkpoint + ": checkpoint lacks the run setting '" + key + "'");
+    if (o.given.count(option) && mine.at(key) != stored->second)
+      throw cli::UsageError(option + " " + mine.at(key) + " differs from the checkpoint's " +
+                            stored->second + " (" + o.checkpoint + ")");
+  }
+  const auto& s = header.run_state;
+  o.data = s.at("data");
+  o.batch = std::stoi(s.at("batch"));
+  o.crop = std::stoi(s.at("crop"));
+  o.lr = std::stod(s.at("lr"));
+  o.halve_every = std::stoi(s.at("halve_every"));
+  o.seed = s.at("seed");
+  o.task = s.at("task");
+  o.spp = s.at("spp");
+  o.train_split = s.at("train_split");
+  for (const char* option : {"--buffers", "--widths", "--dilations", "--feature-dims"})
+    if (o.given.count(option))
+      throw cli::UsageError(std::string(option) + " cannot change when resuming");
+  return header.info;
+}
+
+data::SampleOptions sampleOptions(const TrainOptions& o, const KernelNetConfig& net) {
+  data::SampleOptions s;
+  s.task = o.task == "cleanse" ? data::Task::Cleanse : data::Task::Denoise;
+  s.spp.clear();
+  for (const auto& item : cli::splitList(o.spp)) s.spp.push_back(cli::Args::toInt("--spp", item));
+  if (s.spp.empty()) throw cli::UsageError("--spp needs a list");
+  s.aux = net.input_buffers;
+  s.crop = o.crop;
+  return s;
+}
+
+struct Tensors {
+  torch::Tensor radiance, aux, target;
+};
+
+Tensors toTensors(data::Batch& batch) {
+  const auto shape = [&](int channels) {
+    return std::vector<int64_t>{batch.size, channels, batch.height, batch.width};
+  };
+  return {torch::from_blob(batch.color.data(), shape(3)).clone(),
+          torch::from_blob(batch.aux.data(), shape(batch.auxChannels)).clone(),
+          torch::from_blob(batch.target.data(), shape(3)).clone()};
+}
+
+// A fixed validation set, decoded once: the same crops every time.
+std::vector<Tensors> validationSet(const TrainOptions& o, const KernelNetConfig& net) {
+  auto s = sampleOptions(o, net);
+  s.augment = false;
+  data::LoaderOptions options;
+  options.batchSize = std::min(o.batch, o.val_samples);
+  options.threads = 1;
+  options.seed = 0x5eed;
+  data::Loader loader(data::scanDataset(o.data, o.val_split), s, options);
+  std::vector<Tensors> batches;
+  for (int n = 0; n < o.val_samples; n += options.batchSize) {
+    auto batch = loader.next();
+    batches.push_back(toTensors(batch));
+  }
+  return batches;
+}
+
+class JsonLog {
+ public:
+  explicit JsonLog(const std::string& path) : path_(path), out_(path, std::ios::app) {
+    if (!out_) throw IoError(path + ": cannot open the log for appending");
+  }
+  void write(const std::string& line) {
+    out_ << line << "\n";
+    out_.flush();
+    if (!out_) throw IoError(path_ + ": cannot write the log (disk full?)");
+  }
+
+ private:
+  std::string path_;
+  std::ofstream out_;
+};
+
+int runTrain(cli::Args& args) {
+  TrainOptions o = parseTrain(args);
+  torch::set_num_threads(o.threads);
+  KernelModelInfo info;
+  info.net = o.net;
+  if (o.resume) info = adoptCheckpoint(o);
+  info.task = kernelTaskFromName(o.task);
+  torch::manual_seed(std::stoull(o.seed));
+  KernelTrainer trainer(KernelNet(info.net), info,
+                        KernelTrainerOptions{o.lr, o.halve_every, 0.999, 1.0, 1e-2});
+  uint64_t position = 0;
+  double seconds_before = 0;
+  if (o.resume) {
+    const auto state = trainer.loadCheckpoint(o.checkpoint);
+    position = std::stoull(state.at("loader_position"));
+    seconds_before = std::stod(state.at("seconds"));
+  }
+  trainer.info().notes = {{"data", o.data},
+                          {"task", o.task},
+                          {"batch", std::to_string(o.batch)},
+                          {"crop", std::to_string(o.crop)},
+                          {"spp", o.spp}};
+
+  data::LoaderOptions loader_options;
+  loader_options.batchSize = o.batch;
+  loader_options.threads = 1;
+  loader_options.seed = std::stoull(o.seed);
+  data::Loader loader(data::scanDataset(o.data, o.train_split), sampleOptions(o, info.net),
+                      loader_options, position);
+  std::vector<Tensors> validation;
+  if (o.val_every > 0) validation = validationSet(o, info.net);
+  JsonLog log(o.log);
+  if (trainer.stepCount() == 0)
+    log.write(fmt::format(
+        R"({{"event":"start","task":"{}","data":"{}","batch":{},"crop":{},"buffers":"{}"}})",
+        o.task, o.data, o.batch, o.crop, joined(info.net.input_buffers)));
+  else
+    log.write(fmt::format(R"({{"event":"resume","step":{}}})", trainer.stepCount()));
+
+  std::signal(SIGINT, onStopSignal);
+  std::signal(SIGTERM, onStopSignal);
+  const auto start = Clock::now();
+  auto last_checkpoint = start, last_progress = start;
+  const bool tty = ::isatty(STDERR_FILENO);
+  double window_loss = 0, last_val = -1;
+  int window_steps = 0;
+  const int64_t first_step = trainer.stepCount();
+  auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  auto save = [&] {
+    trainer.saveCheckpoint(o.checkpoint, [&] {
+      auto state = runSettings(o);
+      state["loader_position"] = std::to_string(loader.position());
+      state["seconds"] = fmt::format("{:.1f}", seconds_before + elapsed());
+      return state;
+    }());
+    trainer.info().notes["steps"] = std::to_string(trainer.stepCount());
+    trainer.saveModel(o.out);
+    log.write(fmt::format(R"({{"event":"checkpoint","step":{},"path":"{}"}})", trainer.stepCount(),
+                          o.checkpoint));
+    last_checkpoint = Clock::now();
+  };
+
+  while (trainer.stepCount() < o.steps && !g_stop_signal) {
+    auto batch = loader.next();
+    const auto t = toTensors(batch);
+    window_loss += trainer.step(t.radiance, t.aux, t.target);
+    ++window_steps;
+    const int64_t step = trainer.stepCount();
+    const double rate = double(step - first_step) * o.batch / std::max(elapsed(), 1e-9);
+    if (window_steps == 10 || step == o.steps) {
+      log.write(fmt::format(
+          R"({{"event":"train","step":{},"loss":{:.6f},"lr":{:g},"samples_per_s":{:.2f},"seconds":{:.1f}}})",
+          step, window_loss / window_steps, trainer.currentLearningRate(), rate,
+          seconds_before + elapsed()));
+    }
+    if (o.val_every > 0 && (step % o.val_every == 0 || step == o.steps)) {
+      double sum = 0;
+      for (const auto& v : validation) sum += trainer.evaluate(v.radiance, v.aux, v.target);
+      last_val = sum / validation.size();
+      log.write(
+          fmt::format(R"({{"event":"validation","step":{},"smape":{:.6f}}})", step, last_val));
+    }
+    const auto now = Clock::now();
+    if (tty || now - last_progress > std::chrono::seconds(30) || step == o.steps) {
+      const double eta = (o.steps - step) * o.batch / std::max(rate, 1e-9);
+      const std::string val = last_val >= 0 ? fmt::format("  val {:.4f}", last_val) : "";
+      std::fprintf(
+          stderr, "%s",
+          fmt::format("{}step {}/{}  loss {:.4f}{}  {:.1f} samples/s  elapsed {}  eta {}{}",
+                      tty ? "\r" : "", step, o.steps, window_loss / window_steps, val, rate,
+                      duration(seconds_before + elapsed()), duration(eta), tty ? "\033[K" : "\n")
+              .c_str());
+      last_progress = now;
+    }
+    if (window_steps == 10) window_loss = 0, window_steps = 0;
+    if (now - last_checkpoint > std::chrono::duration<double>(o.checkpoint_minutes * 60)) save();
+  }
+  save();
+  if (tty) std::fputs("\n", stderr);
+  if (g_stop_signal) {
+    std::fprintf(stderr,
+                 "dncleanse: stopped at step %lld; checkpoint %s (continue with --resume)\n",
+                 (long long)trainer.stepCount(), o.checkpoint.c_str());
+    log.write(fmt::format(R"({{"event":"stopped","step":{},"signal":{}}})", trainer.stepCount(),
+                          int(g_stop_signal)));
+    return 128 + g_stop_signal;
+  }
+  log.write(fmt::format(R"({{"event":"done","step":{}}})", trainer.stepCount()));
+  return cli::kExitOk;
+}
+
+// ---------------------------------------------------------------- apply
+
+int runApply(cli::Args& args) {
+  std::string model_path, data_dir, source = "a";
+  bool force = false;
+  int threads = 2;
+  while (!args.done()) {
+    if (args.flag("--model"))
+      model_path = args.value("--model");
+    else if (args.flag("--data"))
+      data_dir = args.value("--data");
+    else if (args.flag("--force"))
+      force = true;
+    else if (args.flag("--source"))
+      source = args.value("--source");
+    else if (args.flag("--threads"))
+      threads = args.intValue("--threads");
+    else
+      throw cli::UsageError("apply: unknown argument '" + args.peek() + "'");
+  }
+  if (model_path.empty() || data_dir.empty())
+    throw cli::UsageError("apply needs --model and --data");
+  if (source != "a" && source != "b") throw cli::UsageError("--source must be a or b");
+  torch::set_num_threads(std::max(1, threads));
+  auto model = loadKernelModel(model_path);
+  if (model.info.task != KernelTask::Cleanse)
+    throw ModelError(model_path + ": a " + kernelTaskName(model.info.task) +
+                     " model; apply --data needs a cleanse model");
+  const auto frames = data::scanDataset(data_dir);
+  ReadOptions read;
+  read.only = requiredBuffers(model.info.net);
+  int written = 0, skipped = 0;
+  const auto start = Clock::now();
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const fs::path dir(frames[i].dir);
+    const auto out = (dir / "gt_clean.exr").string();
+    if (!force && fs::exists(out)) {
+      ++skipped;
+      continue;
+    }
+    const auto frame = readFrame((dir / ("gt_" + source + ".exr")).string(), read);
+    writeImage(out, runKernelNet(model.net, frame), false, {"R", "G", "B"});
+    ++written;
+    std::fprintf(stderr, "frame %zu/%zu  %s\n", i + 1, frames.size(), out.c_str());
+  }
+  const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  std::fprintf(stderr, "dncleanse: wrote %d gt_clean.exr, skipped %d existing (%s)\n", written,
+               skipped, duration(seconds).c_str());
+  return cli::kExitOk;
+}
+
+// ---------------------------------------------------------------- one file
+
+int runFile(cli::Args& args) {
+  std::string input, output, model_path, layer;
+  bool rgb = false;
+  int threads = 2;
+  while (!args.done()) {
+    if (args.flag("-o", "--output"))
+      output = args.value("-o");
+    else if (args.flag("--model"))
+      model_path = args.value("--model");
+    else if (args.flag("--layer"))
+      layer = args.value("--layer");
+    else if (args.flag("--rgb"))
+      rgb = true;
+    else if (args.flag("--threads"))
+      threads = args.intValue("--threads");
+    else if (args.peek().rfind("-", 0) == 0 && args.peek() != "-")
+      throw cli::UsageError("unknown option '" + args.peek() + "'");
+    else if (input.empty())
+      input = args.positional();
+    else
+      throw cli::UsageError("one input file only ('" + args.peek() + "')");
+  }
+  if (input.empty() || output.empty() || model_path.empty())
+    throw cli::UsageError("usage: dncleanse IN.exr -o OUT.exr --model MODEL (see --help)");
+  torch::set_num_threads(std::max(1, threads));
+  auto model = loadKernelModel(model_path);
+  ReadOptions read;
+  read.only = requiredBuffers(model.info.net);
+  const auto frame = readFrame(input, read);
+  WriteOptions write;
+  write.half = false;
+  write.rgbOnly = rgb;
+  write.layer = !layer.empty()
+                    ? layer
+                    : layerPrefixOf(frame) +
+                          (model.info.task == KernelTask::Cleanse ? "Cleansed" : "Denoised");
+  writeResult(input, output, runKernelNet(model.net, frame), write);
+  return cli::kExitOk;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    cli::Args args(argc, argv);
+    if (args.done()) throw cli::UsageError("no arguments (see --help)");
+    if (args.flag("-h", "--help")) {
+      std::fputs(kUsage, stdout);
+      return cli::kExitOk;
+    }
+    if (args.flag("train")) return runTrain(args);
+    if (args.flag("apply")) return runApply(args);
+    return runFile(args);
+  } catch (const cli::UsageError& error) {
+    std::fprintf(stderr, "dncleanse: %s\n", error.what());
+  } catch (const IoError& error) {
+    std::fprintf(stderr, "dncleanse: %s\n", error.what());
+  } catch (const ModelError& error) {
+    std::fprintf(stderr, "dncleanse: %s\n", error.what());
+  } catch (const std::exception& error) {
+    std::string what = error.what();
+    std::fprintf(stderr, "dncleanse: %s\n", what.substr(0, what.find('\n')).c_str());
+  }
+  return cli::kExitError;
+}
