@@ -1,0 +1,194 @@
+#!/usr/bin/env python3
+"""dntrain and dndenoise end to end on a tiny synthetic data set with a tiny
+model: training, interruption and exact resumption, denoising outputs, seeds,
+tiles, samples, and every bad-input case (one line naming the file, exit 1,
+no output written)."""
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+try:
+    import numpy as np
+    import OpenEXR
+    sys.path.insert(0, os.path.dirname(__file__))
+    from exr_numpy import read_rgb, write_rgb
+except ImportError as e:  # CTest reports this as skipped
+    print(f"skipped: {e}")
+    sys.exit(77)
+
+checks = failures = 0
+
+
+def check(label, ok, detail=""):
+    global checks, failures
+    checks += 1
+    failures += not ok
+    print(f"{'ok  ' if ok else 'FAIL'} {label}{'' if ok else ': ' + str(detail)[:2000]}", flush=True)
+
+
+def run(cmd, **kw):
+    return subprocess.run(cmd, capture_output=True, text=True, **kw)
+
+
+def channels_of(path):
+    with OpenEXR.File(path, separate_channels=True) as f:
+        return {k: v.pixels for k, v in f.channels().items()}
+
+
+def log_losses(path):
+    with open(path) as f:
+        return {j["step"]: j["loss"] for j in map(json.loads, f)}
+
+
+def expect_error(label, cmd, must_name, no_file=None, code=1):
+    out = run(cmd)
+    lines = out.stderr.strip().splitlines()
+    check(f"{label}: exit {code}", out.returncode == code, f"exit {out.returncode}: {out.stderr}")
+    check(f"{label}: one line naming {os.path.basename(must_name)}", len(lines) == 1 and must_name in lines[0],
+          out.stderr)
+    if no_file:
+        check(f"{label}: nothing written", not os.path.exists(no_file), no_file)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--bin", required=True)
+    ap.add_argument("--work-dir", required=True)
+    args = ap.parse_args()
+    w = args.work_dir
+    shutil.rmtree(w, ignore_errors=True)
+    os.makedirs(w)
+    p = lambda *n: os.path.join(w, *n)  # noqa: E731
+    dntrain, dndenoise = os.path.join(args.bin, "dntrain"), os.path.join(args.bin, "dndenoise")
+    data = p("data")
+    subprocess.run([sys.executable, os.path.join(os.path.dirname(__file__), "make_tiny_dataset.py"), data,
+                    "--size", "32"], check=True)
+    tiny = ["--batch", "2", "--crop", "16", "--threads", "1", "--spp", "4,16"]
+
+    # Pretrain a tiny prior.
+    out = run([dntrain, "base", "--data", data, "--out", p("base.dnm"), "--steps", "3", "--val-every", "3",
+               "--base-channels", "8", "--res-blocks", "1"] + tiny)
+    check("dntrain base: exit 0 and a model file", out.returncode == 0 and os.path.exists(p("base.dnm")), out.stderr)
+    with open(p("base.dnm.log.jsonl")) as f:
+        lines = [json.loads(line) for line in f]
+    check("dntrain base: a JSON line per step, validation on the last", len(lines) == 3 and "val_psnr" in lines[-1],
+          lines)
+
+    # Control: one uninterrupted run, and one interrupted and resumed; same losses.
+    control = [dntrain, "control", "--data", data, "--base", p("base.dnm"), "--steps", "6", "--val-every", "0"] + tiny
+    out = run(control + ["--out", p("straight.dnm")])
+    check("dntrain control: exit 0", out.returncode == 0, out.stderr)
+    proc = subprocess.Popen(control + ["--out", p("resumed.dnm"), "--checkpoint-minutes", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    log = p("resumed.dnm.log.jsonl")
+    deadline = time.time() + 120
+    while time.time() < deadline and (not os.path.exists(log) or len(open(log).readlines()) < 2):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate()
+    check("SIGINT: exit 130 with a checkpoint, no model file",
+          proc.returncode == 130 and os.path.exists(p("resumed.dnm.ckpt")) and not os.path.exists(p("resumed.dnm")),
+          f"exit {proc.returncode}: {err}")
+    out = run(control + ["--out", p("resumed.dnm"), "--resume"])
+    check("--resume finishes the run", out.returncode == 0 and os.path.exists(p("resumed.dnm")), out.stderr)
+    straight, resumed = log_losses(p("straight.dnm.log.jsonl")), log_losses(log)
+    check("resumed losses equal the uninterrupted run's at every step", straight == resumed,
+          f"{straight} vs {resumed}")
+
+    model = p("straight.dnm")
+    frame = os.path.join(data, "val", "scene_0", "frame_0", "spp4_00.exr")
+    ref = os.path.join(data, "val", "scene_0", "frame_0", "gt_a.exr")
+    base_cmd = [dndenoise, "--model", model, "--steps", "6", "--skip", "2", "--threads", "1"]
+
+    out = run(base_cmd + [frame, "-o", p("out.exr")])
+    check("dndenoise: exit 0", out.returncode == 0, out.stderr)
+    chans = channels_of(p("out.exr"))
+    check("output keeps every input layer and adds ViewLayer.Denoised",
+          set(channels_of(frame)) <= set(chans) and "ViewLayer.Denoised.R" in chans, sorted(chans))
+    denoised = read_rgb(p("out.exr"), "ViewLayer.Denoised")
+    check("output is finite and HDR-ranged", np.isfinite(denoised).all() and denoised.min() >= 0, denoised.max())
+
+    run(base_cmd + [frame, "-o", p("again.exr")])
+    check("same seed, same output, bit for bit",
+          np.array_equal(read_rgb(p("again.exr"), "ViewLayer.Denoised"), denoised))
+    run(base_cmd + ["--seed", "5", frame, "-o", p("seed5.exr")])
+    check("another seed, another sample", not np.array_equal(read_rgb(p("seed5.exr"), "ViewLayer.Denoised"), denoised))
+
+    out = run(base_cmd + ["--tile", "16", "--overlap", "8", "-v", frame, "-o", p("tiled.exr")])
+    tiled = read_rgb(p("tiled.exr"), "ViewLayer.Denoised")
+    check("tiled run: 9 tiles reported, finite output", out.returncode == 0 and "9 tile(s)" in out.stderr
+          and np.isfinite(tiled).all(), out.stderr)
+
+    out = run(base_cmd + ["--samples", "2", frame, "-o", p("samples.exr")])
+    chans = channels_of(p("samples.exr"))
+    check("--samples 2 adds an uncertainty layer", out.returncode == 0 and "ViewLayer.uncertainty.Y" in chans
+          and chans["ViewLayer.uncertainty.Y"].max() > 0, sorted(chans))
+
+    out = run(base_cmd + ["--rgb-only", frame, "-o", p("rgb.exr")])
+    check("--rgb-only writes R,G,B only", out.returncode == 0 and set(channels_of(p("rgb.exr"))) == {"R", "G", "B"})
+
+    seq_in = p("seq")
+    os.makedirs(seq_in)
+    for i in (1, 2):
+        shutil.copy(frame, os.path.join(seq_in, f"shot.{i:04d}.exr"))
+    out = run(base_cmd + [os.path.join(seq_in, "shot.####.exr"), "-o", os.path.join(seq_in, "out.%04d.exr")])
+    check("frame sequences", out.returncode == 0 and all(
+        os.path.exists(os.path.join(seq_in, f"out.{i:04d}.exr")) for i in (1, 2)), out.stderr)
+
+    out = run(base_cmd + ["--ref", ref, "--maxerror", "l1=1e-9", frame, "-o", p("gate.exr")])
+    check("--ref/--maxerror: exit 2 when worse", out.returncode == 2, out.stderr)
+
+    nan_img = read_rgb(frame)
+    nan_img[1, 1] = np.nan
+    nan_img[2, 2] = -5
+    nan_img[3, 3] = np.inf
+    nan_path = p("nan.exr")
+    shutil.copy(frame, nan_path)
+    with OpenEXR.File(frame, separate_channels=True) as f:
+        ch = {k: v.pixels.copy() for k, v in f.channels().items()}
+    for i, c in enumerate("RGB"):
+        ch[f"ViewLayer.Combined.{c}"] = nan_img[:, :, i].astype(np.float32)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, ch) as f:
+        f.write(nan_path)
+    out = run(base_cmd + ["-v", nan_path, "-o", p("nan_out.exr")])
+    check("NaN/Inf/negative input: finite output, counted with -v", out.returncode == 0 and np.isfinite(
+        read_rgb(p("nan_out.exr"), "ViewLayer.Denoised")).all() and "6 NaN/Inf and 3 negative values" in out.stderr,
+          out.stderr)
+
+    write_rgb(p("rgb_only_input.exr"), np.full(nan_img.shape, 0.5, np.float32))
+    expect_error("missing aux buffers", base_cmd + [p("rgb_only_input.exr"), "-o", p("x1.exr")],
+                 "rgb_only_input.exr", p("x1.exr"))
+    out = run(base_cmd + [p("rgb_only_input.exr"), "-o", p("x1.exr")])
+    check("missing aux: the message lists needs and has", "needs albedo" in out.stderr and "has color" in out.stderr,
+          out.stderr)
+    raw = open(model, "rb").read()
+    with open(p("cut.dnm"), "wb") as f:
+        f.write(raw[: len(raw) // 2])
+    expect_error("truncated model", [dndenoise, "--model", p("cut.dnm"), frame, "-o", p("x2.exr")], "cut.dnm",
+                 p("x2.exr"))
+    with open(p("text.dnm"), "w") as f:
+        f.write("not a model\n")
+    expect_error("not a model file", [dndenoise, "--model", p("text.dnm"), frame, "-o", p("x3.exr")], "text.dnm",
+                 p("x3.exr"))
+    corrupt = bytearray(raw)
+    corrupt[len(corrupt) // 2] ^= 0xFF
+    with open(p("flipped.dnm"), "wb") as f:
+        f.write(corrupt)
+    expect_error("corrupt model (one flipped byte)", [dndenoise, "--model", p("flipped.dnm"), frame, "-o",
+                                                      p("x4.exr")], "flipped.dnm", p("x4.exr"))
+    expect_error("missing input", base_cmd + [p("nope.exr"), "-o", p("x5.exr")], "nope.exr", p("x5.exr"))
+    before = open(frame, "rb").read()
+    expect_error("output is the input", base_cmd + [frame, "-o", frame], frame)
+    check("input untouched", open(frame, "rb").read() == before)
+
+    print(f"{checks - failures} passed, {failures} failed")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
