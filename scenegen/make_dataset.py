@@ -54,6 +54,7 @@ def parse_args(argv):
     p.add_argument("--out", required=True, help="output folder (shared by all shards)")
     p.add_argument("--scenes", type=int, default=10, help="number of scenes (seeds)")
     p.add_argument("--first-seed", type=int, default=0)
+    p.add_argument("--seeds", default="", help="comma list of seeds; replaces --scenes/--first-seed")
     p.add_argument("--res", type=int, default=128)
     p.add_argument("--spp", type=int, default=4, help="samples per pixel of each noisy stack")
     p.add_argument("--stacks", type=int, default=16, help="independent noisy renders per frame")
@@ -65,6 +66,12 @@ def parse_args(argv):
     p.add_argument("--blender", default="blender")
     p.add_argument("--manifest-only", action="store_true", help="only rebuild manifest.json from disk")
     args = p.parse_args(argv)
+    try:
+        args.seed_list = [int(x) for x in args.seeds.split(",") if x.strip()] if args.seeds else \
+            list(range(args.first_seed, args.first_seed + args.scenes))
+    except ValueError:
+        p.error("--seeds wants a comma list of integers, got %r" % args.seeds)
+    args.scenes = len(args.seed_list)
     if min(args.scenes, args.res, args.spp, args.stacks, args.gt_spp, args.frames, args.threads) < 1:
         p.error("--scenes, --res, --spp, --stacks, --gt-spp, --frames and --threads must be positive")
     return args
@@ -127,7 +134,7 @@ def write_manifest(args, bversion):
     settings = render_settings(args)
     scenes = []
     counts = {"train": 0, "val": 0, "test": 0}
-    for seed in range(args.first_seed, args.first_seed + args.scenes):
+    for seed in args.seed_list:
         sdir = scene_dir(args.out, seed)
         frames = []
         for k in range(args.frames):
@@ -152,7 +159,7 @@ def write_manifest(args, bversion):
     manifest = {
         "manifest_version": MANIFEST_VERSION, "generator_versions": versions,
         "blender_version": bversion, "settings": settings,
-        "seeds": {"first": args.first_seed, "count": args.scenes},
+        "seeds": args.seed_list if args.seeds else {"first": args.first_seed, "count": args.scenes},
         "split_rule": {"test": TEST_FRACTION, "val": VAL_FRACTION,
                        "how": "u = first 32 bits of sha256('split:<seed>') / 2^32; test if u<0.05, val if u<0.08"},
         "scene_counts": counts, "frame_count": sum(len(s["frames"]) for s in scenes),
@@ -180,7 +187,7 @@ def main(argv):
     os.makedirs(log_dir, exist_ok=True)
     settings = render_settings(args)
     shard_i, shard_n = args.shard
-    seeds = [s for j, s in enumerate(range(args.first_seed, args.first_seed + args.scenes)) if j % shard_n == shard_i]
+    seeds = [s for j, s in enumerate(args.seed_list) if j % shard_n == shard_i]
     work = [(s, [k for k in range(args.frames) if not frame_done(scene_dir(args.out, s), k, settings)]) for s in seeds]
     work = [(s, todo) for s, todo in work if todo]
     total = sum(len(todo) for _, todo in work)
