@@ -674,6 +674,7 @@ def add_volume(rng, mats_log, half_extent, height):
         obj.scale = (half_extent, half_extent, height / 2)
         obj.location = (0, 0, height / 2 - 0.01)
         vol.inputs["Density"].default_value = rng.uniform(0.01, 0.12)
+        obj["fog"] = True
         label = "fog"
     else:
         bpy.ops.mesh.primitive_ico_sphere_add(radius=rng.uniform(0.4, 1.2), subdivisions=3)
@@ -766,6 +767,67 @@ def build_objects(rng, mats, archetype, extent, floor_z=0.0):
     return objs
 
 
+def draw_move(rng, pose, room):
+    """A start pose and a small orbit / dolly / crane / pan from it."""
+    start, tgt0 = pose()
+    move = rng.choice(["orbit", "dolly", "crane", "pan", "mixed"])
+    rel = start - tgt0
+    ang = rng.uniform(-0.35, 0.35) if move in ("orbit", "mixed") else 0.0
+    rot = Matrix.Rotation(ang, 3, "Z")
+    end = tgt0 + rot @ rel
+    if move in ("dolly", "mixed"):
+        end = tgt0 + (end - tgt0) * rng.uniform(0.7, 1.25)
+    if move in ("crane", "mixed"):
+        end.z = max(0.2, end.z + rng.uniform(-0.6, 0.6))
+    tgt1 = tgt0.copy()
+    if move in ("pan", "mixed"):
+        tgt1 += Vector((rng.uniform(-0.6, 0.6), rng.uniform(-0.6, 0.6), rng.uniform(-0.2, 0.2)))
+    if room is not None:
+        w, d, h = room
+        end.x = min(max(end.x, -w / 2 + 0.3), w / 2 - 0.3)
+        end.y = min(max(end.y, -d / 2 + 0.3), d / 2 - 0.3)
+        end.z = min(max(end.z, 0.3), h - 0.3)
+    return start, end, tgt0, tgt1, move
+
+
+def camera_obstacles():
+    """Bounding boxes the camera must stay out of (set pieces it lives in are not obstacles)."""
+    boxes = []
+    for obj in bpy.context.scene.objects:
+        if obj.type in ("MESH", "CURVE", "FONT") and obj.name not in ("floor", "backdrop", "room") \
+                and not (obj.name == "volume" and obj.get("fog")):
+            lo, hi = evaluated_bounds(obj)
+            boxes.append((lo - Vector((0.08,) * 3), hi + Vector((0.08,) * 3)))
+    return boxes
+
+
+def view_is_blocked(p, target, lens):
+    """True when most of the view is a surface right in front of the lens."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    ahead = (target - p).normalized()
+    right = ahead.cross(Vector((0, 0, 1))).normalized()
+    up = right.cross(ahead)
+    spread = 18.0 / lens  # tan of half the horizontal field of view (36 mm sensor)
+    near = max(0.6, 0.25 * (target - p).length)
+    blocked = 0
+    for u in (-0.75, -0.25, 0.25, 0.75):
+        for v in (-0.75, -0.25, 0.25, 0.75):
+            ray = (ahead + right * (u * spread) + up * (v * spread)).normalized()
+            hit, _, _, _, obj, _ = bpy.context.scene.ray_cast(depsgraph, p, ray, distance=near)
+            blocked += bool(hit and not obj.get("fog"))
+    return blocked > 8
+
+
+def path_is_clear(start, end, tgt0, tgt1, obstacles, archetype, lens):
+    for i in range(9):
+        p = start.lerp(end, i / 8)
+        if p.z < 0.1 or (archetype == "studio" and p.y > 3.5):  # under the floor, behind the backdrop
+            return False
+        if any(all(lo[j] <= p[j] <= hi[j] for j in range(3)) for lo, hi in obstacles):
+            return False
+    return not any(view_is_blocked(start.lerp(end, t), tgt0.lerp(tgt1, t), lens) for t in (0.0, 0.5, 1.0))
+
+
 def build_camera(rng, archetype, extent, room=None):
     cam_data = bpy.data.cameras.new("camera")
     cam_data.lens = rng.uniform(22, 70)
@@ -795,25 +857,11 @@ def build_camera(rng, archetype, extent, room=None):
             tgt = Vector((rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(0.1, 0.8)))
         return loc, tgt
 
-    start, tgt0 = pose()
-    # The move: a small orbit / dolly / crane from the start pose.
-    move = rng.choice(["orbit", "dolly", "crane", "pan", "mixed"])
-    rel = start - tgt0
-    ang = rng.uniform(-0.35, 0.35) if move in ("orbit", "mixed") else 0.0
-    rot = Matrix.Rotation(ang, 3, "Z")
-    end = tgt0 + rot @ rel
-    if move in ("dolly", "mixed"):
-        end = tgt0 + (end - tgt0) * rng.uniform(0.7, 1.25)
-    if move in ("crane", "mixed"):
-        end.z = max(0.2, end.z + rng.uniform(-0.6, 0.6))
-    tgt1 = tgt0.copy()
-    if move in ("pan", "mixed"):
-        tgt1 += Vector((rng.uniform(-0.6, 0.6), rng.uniform(-0.6, 0.6), rng.uniform(-0.2, 0.2)))
-    if room is not None:
-        w, d, h = room
-        end.x = min(max(end.x, -w / 2 + 0.3), w / 2 - 0.3)
-        end.y = min(max(end.y, -d / 2 + 0.3), d / 2 - 0.3)
-        end.z = min(max(end.z, 0.3), h - 0.3)
+    obstacles = camera_obstacles()
+    for _ in range(200):  # redraw until no camera position of the move is inside an object
+        start, end, tgt0, tgt1, move = draw_move(rng, pose, room)
+        if path_is_clear(start, end, tgt0, tgt1, obstacles, archetype, cam_data.lens):
+            break
     return cam, target, (start, end, tgt0, tgt1, move)
 
 

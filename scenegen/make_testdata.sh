@@ -8,7 +8,7 @@ set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 td="$here/../testdata"
 "$here/make_pairs.sh" "$td/pairs" 128 4 1024 101 102 103 104 105 106
-"$here/make_pairs.sh" "$td/example" 256 4 1024 201
 python3 "$here/make_dataset.py" --out "$td/dataset" --seeds 300,304,314 --res 64 --spp 4 --stacks 4 \
   --gt-spp 512 --frames 2 --threads "${THREADS:-2}"
 rm -rf "$td/dataset/logs"
+"$here/make_pairs.sh" "$td/example" 256 4 1024 201
