@@ -122,7 +122,12 @@ void Trainer::saveCheckpoint(const std::string& path) {
 
 void Trainer::loadCheckpoint(const std::string& path) {
   auto file = readArchiveFile(path, "checkpoint");
-  if (file.text != modelInfoToText(info_))
+  // Notes may change between runs; the architecture and diffusion setup may not.
+  auto without_notes = [](ModelInfo info) {
+    info.notes.clear();
+    return modelInfoToText(info);
+  };
+  if (without_notes(modelInfoFromText(file.text, path)) != without_notes(info_))
     throw ModelError(path + ": checkpoint was written for a different model configuration");
   try {
     torch::serialize::InputArchive model_archive, optimizer_archive, ema_archive;

@@ -19,10 +19,12 @@ struct UNetConfig {
   int64_t in_channels = 3;    // z_t
   int64_t cond_channels = 3;  // conditioning image, concatenated to z_t
   int64_t out_channels = 3;
+  // Default: small enough to train on 2 CPU cores (see bench/core_bench.cpp);
+  // attention only at the coarsest level (1/8 resolution) and in the middle.
   int64_t base_channels = 32;
-  std::vector<int64_t> channel_mults = {1, 2, 4};  // one level per entry
-  int64_t res_blocks = 2;                          // per encoder level (decoder: one more)
-  std::vector<int64_t> attention_levels = {2};     // levels with self-attention
+  std::vector<int64_t> channel_mults = {1, 2, 3, 4};  // one level per entry
+  int64_t res_blocks = 1;                             // per encoder level (decoder: one more)
+  std::vector<int64_t> attention_levels = {3};        // levels with self-attention
   bool middle_attention = true;
   int64_t head_channels = 32;
   int64_t norm_groups = 8;
