@@ -50,7 +50,7 @@ options:
   --lr X                learning rate (default 2e-4)  --halve-every N  halve lr every N steps
   --ema X               EMA decay (default 0.999)     --seed N  (default 1)
   --prediction eps|v    network output (default eps)
-  --base-channels N --res-blocks N   prior size (base only; default 32, 2)
+  --base-channels N --res-blocks N   prior size (base only; default: the UNet defaults)
   --default-skip S      skip stored in the model for dndenoise (default: 18 control, 0 base)
   --val-every N         validation every N steps (default 250; 0 disables)
   --log FILE            JSON-lines log (default: OUT.log.jsonl)
@@ -70,8 +70,8 @@ struct Options {
   std::vector<std::string> photos;
   std::string aux = "default", prediction = "eps";
   std::vector<int> spp = {4, 16, 64};
-  int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 32,
-          resBlocks = 2, defaultSkip = -1;
+  int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
+          resBlocks = 0, defaultSkip = -1;
   double lr = 2e-4, ema = 0.999, checkpointMinutes = 5;
   uint64_t seed = 1;
   int threads = 0;
@@ -170,8 +170,8 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
   ModelInfo info;
   std::shared_ptr<ConditionalDenoiser> model;
   if (o.mode == "base") {
-    info.base.base_channels = o.baseChannels;
-    info.base.res_blocks = o.resBlocks;
+    if (o.baseChannels > 0) info.base.base_channels = o.baseChannels;
+    if (o.resBlocks > 0) info.base.res_blocks = o.resBlocks;
     info.has_control = false;
     info.prediction = predictionFromName(o.prediction == "eps" ? "epsilon" : "v");
     info.notes["default_skip"] = std::to_string(std::max<int64_t>(0, o.defaultSkip));
