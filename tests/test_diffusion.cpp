@@ -208,6 +208,18 @@ TEST_CASE("step skipping starts at step K-1-s from the forward-diffused conditio
     CHECK(maxAbsDiff(first_z, expected) < 1e-6);
   }
   CHECK(startStep(schedule, 18) == 8);
+  // Skipping to a start whose noise covers the render's: the chosen start reaches
+  // the level, and one more skipped step would not.
+  for (double level : {0.05, 0.3, 1.0}) {
+    CAPTURE(level);
+    const int64_t skip = maxSkipForNoise(schedule, level);
+    auto noise_at = [&](int64_t step) {
+      return std::sqrt((1 - schedule.alphaBar(step)) / schedule.alphaBar(step));
+    };
+    CHECK(noise_at(startStep(schedule, skip)) >= level);
+    if (skip + 1 < schedule.size()) CHECK(noise_at(startStep(schedule, skip + 1)) < level);
+  }
+  CHECK(maxSkipForNoise(schedule, 1e6) == 0);
   CHECK_THROWS_AS(startStep(schedule, 27), std::invalid_argument);
 }
 

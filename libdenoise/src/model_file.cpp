@@ -307,7 +307,7 @@ ArchiveFile readArchiveFile(const std::string& path, const std::string& kind) {
     throw ModelError(path + ": checksum mismatch (the file is corrupt)");
   try {
     file.archive.load_from(payload.data(), payload.size());
-  } catch (const std::exception& error) {
+  } catch (const std::exception&) {
     throw ModelError(path + ": unreadable tensor archive");
   }
   return file;

@@ -63,6 +63,15 @@ int64_t startStep(const NoiseSchedule& schedule, int64_t skip_steps) {
   return schedule.size() - 1 - skip_steps;
 }
 
+int64_t maxSkipForNoise(const NoiseSchedule& schedule, double noise_std) {
+  // Noise decreases with the step index, so scan from the least noisy step up.
+  for (int64_t step = 0; step < schedule.size(); ++step) {
+    const double ab = schedule.alphaBar(step);
+    if (std::sqrt((1.0 - ab) / ab) >= noise_std) return schedule.size() - 1 - step;
+  }
+  return 0;
+}
+
 torch::Tensor initialLatent(const NoiseSchedule& schedule, const torch::Tensor& start_image,
                             int64_t skip_steps, torch::Generator& generator) {
   const int64_t step = startStep(schedule, skip_steps);

@@ -39,6 +39,11 @@ PosteriorCoefficients ddpmPosterior(const NoiseSchedule& schedule, int64_t step)
 // The first step executed when skipping `skip_steps` of the schedule's steps.
 int64_t startStep(const NoiseSchedule& schedule, int64_t skip_steps);
 
+// The most steps that can be skipped while the forward noise at the start step,
+// in image units sqrt((1 - alpha_bar) / alpha_bar), still reaches `noise_std`
+// (the render's own noise in model space, times any safety factor). 0 if none.
+int64_t maxSkipForNoise(const NoiseSchedule& schedule, double noise_std);
+
 // z at the start step: N(0, I) without skipping, else forward-diffused `start_image`.
 torch::Tensor initialLatent(const NoiseSchedule& schedule, const torch::Tensor& start_image,
                             int64_t skip_steps, torch::Generator& generator);
