@@ -209,3 +209,46 @@ TEST_CASE("loader errors name the frame") {
     CHECK(std::string(e.what()).find("frame_0: 64 spp needs 16 stacks") != std::string::npos);
   }
 }
+
+TEST_CASE("the committed sample data set loads with every default buffer") {
+  auto frames = scanDataset(DN_TESTDATA "/dataset", "train");
+  REQUIRE(!frames.empty());
+  SampleOptions options;
+  options.spp = {4, 16};
+  options.aux = {"albedo",
+                 "normal",
+                 "depth",
+                 "diffuse_direct",
+                 "diffuse_indirect",
+                 "diffuse_color",
+                 "glossy_direct",
+                 "glossy_indirect",
+                 "glossy_color",
+                 "transmission_direct",
+                 "transmission_indirect",
+                 "transmission_color"};
+  options.crop = 32;
+  auto frame = FrameData::load(frames[0], options);
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < 8; ++i) {
+    Sample s = frame->draw(rng, options);
+    CHECK(s.aux.channels == 34);
+    for (float v : s.color.pixels) REQUIRE(std::isfinite(v));
+    for (float v : s.aux.pixels) REQUIRE(std::isfinite(v));
+    // Averaged unit normals stay within the unit ball, whatever the orientation.
+    for (std::size_t p = 0; p < s.aux.pixelCount(); ++p) {
+      const float* n = &s.aux.pixels[p * 34 + 3];
+      CHECK(n[0] * n[0] + n[1] * n[1] + n[2] * n[2] <= doctest::Approx(1.0f).epsilon(0.02));
+    }
+  }
+  // The target is the mean of the two ground-truth renders (no gt_clean.exr yet).
+  SampleOptions clean;
+  clean.task = Task::Clean;
+  clean.crop = 0;
+  clean.augment = false;
+  Sample t = FrameData::load(frames[0], clean)->draw(rng, clean);
+  Image a = readImage(frames[0].dir + "/gt_a.exr", 3),
+        b = readImage(frames[0].dir + "/gt_b.exr", 3);
+  if (!std::filesystem::exists(frames[0].dir + "/gt_clean.exr"))
+    CHECK(t.target.pixels[123] == doctest::Approx(0.5f * (a.pixels[123] + b.pixels[123])));
+}
