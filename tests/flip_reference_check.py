@@ -88,7 +88,7 @@ def check_pair(cli, reference_path, test_path, root, work_dir, tolerance):
     linear_test = np.ascontiguousarray(np.maximum(test, 0), dtype=np.float32)
     hdr, hdr_seconds, used = reference_flip(linear_ref, linear_test, "HDR", {})
     ok = magma_mismatch <= 0.001
-    print(f"{'ok  ' if ok else 'FAIL'} {name:28s} magma   {magma_mismatch:.2e} of pixels differ "
+    print(f"{'ok  ' if ok else 'FAIL'} {name:44s} magma   {magma_mismatch:.2e} of pixels differ "
           f"from flip-evaluator's heatmap")
     for metric, theirs, our_seconds, their_seconds in (
             ("flip", ldr, ours["flip_seconds"], ldr_seconds),
@@ -96,10 +96,10 @@ def check_pair(cli, reference_path, test_path, root, work_dir, tolerance):
         relative = abs(ours[metric] - theirs) / max(abs(theirs), 1e-9)
         good = relative <= tolerance
         ok &= good
-        print(f"{'ok  ' if good else 'FAIL'} {name:28s} {metric:7s} ours {ours[metric]:.6f}  "
+        print(f"{'ok  ' if good else 'FAIL'} {name:44s} {metric:7s} ours {ours[metric]:.6f}  "
               f"flip-evaluator {theirs:.6f}  rel {relative:.2e}  "
               f"time ours {our_seconds:.3f}s ref {their_seconds:.3f}s")
-    print(f"     {'':28s} {ours['width']}x{ours['height']}, exposures ours "
+    print(f"     {'':44s} {ours['width']}x{ours['height']}, exposures ours "
           f"[{ours['start_exposure']:.4f}, {ours['stop_exposure']:.4f}] x{ours['num_exposures']}, "
           f"reference [{used['startExposure']:.4f}, {used['stopExposure']:.4f}] "
           f"x{used['numExposures']}")
