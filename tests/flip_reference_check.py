@@ -8,8 +8,8 @@ For every pair, flip_cli computes
 and dumps the float RGB it read; flip-evaluator then runs on exactly that data.
 Means must agree within --tolerance (relative, default 1%).
 
-Pairs: testdata/pairs/NAME_<N>spp.exr against NAME_ref.exr, scenegen frames
-(sppN_00.exr against gt_a.exr) below testdata, and any given as
+Pairs: testdata/pairs/NAME_<N>spp.exr against NAME_ref.exr, a few scenegen
+frames (sppN_00.exr against gt_a.exr) below testdata, and any given as
 REFERENCE.exr:TEST.exr arguments. Fewer than --min-pairs pairs is a failure.
 Exit 0 when all agree, 1 otherwise, 77 (skipped) when flip_evaluator is not
 installed (pip install flip-evaluator).
@@ -31,9 +31,9 @@ except ImportError as e:  # CTest reports this as skipped
     sys.exit(77)
 
 
-def discover_pairs(testdata):
-    """pairs/NAME_<N>spp.exr with NAME_ref.exr, and scenegen frames anywhere
-    below testdata: sppN_00.exr with gt_a.exr in the same folder."""
+def discover_pairs(testdata, max_frames):
+    """pairs/NAME_<N>spp.exr with NAME_ref.exr, and up to max_frames scenegen
+    frames anywhere below testdata: sppN_00.exr with gt_a.exr in the same folder."""
     pairs = []
     for test in sorted(glob.glob(os.path.join(testdata, "pairs", "*_*spp.exr"))):
         match = re.match(r"(.*)_\d+spp\.exr$", test)
@@ -43,8 +43,9 @@ def discover_pairs(testdata):
     for reference in sorted(glob.glob(os.path.join(testdata, "**", "gt_a.exr"), recursive=True)):
         folder = os.path.dirname(reference)
         tests = sorted(glob.glob(os.path.join(folder, "spp*_00.exr")))
-        if tests:
+        if tests and max_frames > 0:
             pairs.append((reference, tests[0]))
+            max_frames -= 1
     return pairs
 
 
@@ -113,11 +114,13 @@ def main():
     parser.add_argument("--work-dir", required=True, help="where the dumped float data goes")
     parser.add_argument("--tolerance", type=float, default=0.01)
     parser.add_argument("--min-pairs", type=int, default=5)
+    parser.add_argument("--max-frames", type=int, default=2,
+                        help="at most this many scenegen frames (all of pairs/ are used)")
     parser.add_argument("pairs", nargs="*", help="REFERENCE.exr:TEST.exr")
     args = parser.parse_args()
     os.makedirs(args.work_dir, exist_ok=True)
 
-    pairs = discover_pairs(args.testdata) if args.testdata else []
+    pairs = discover_pairs(args.testdata, args.max_frames) if args.testdata else []
     pairs += [tuple(p.split(":", 1)) for p in args.pairs]
     if len(pairs) < args.min_pairs:
         print(f"FAIL: {len(pairs)} render pairs found, at least {args.min_pairs} needed "
