@@ -165,9 +165,45 @@ TEST_CASE("banded filtering equals one pass") {
   auto whole = affinityFilter(image, features, bandwidth, centre, 5, 4);
   auto banded = affinityFilter(image, features, bandwidth, centre, 5, 4, 1);  // one row per band
   CHECK(torch::allclose(whole, banded, 1e-6, 1e-7));
+  {
+    torch::NoGradGuard no_grad;  // the inference path (strided views instead of unfold)
+    CHECK(torch::allclose(whole, affinityFilter(image, features, bandwidth, centre, 5, 4), 1e-6,
+                          1e-7));
+    CHECK(torch::allclose(whole, affinityFilter(image, features, bandwidth, centre, 5, 4, 1), 1e-6,
+                          1e-7));
+  }
   // Outputs lie within the inputs' range (convex combinations).
   CHECK(whole.min().item<double>() >= image.min().item<double>() - 1e-6);
   CHECK(whole.max().item<double>() <= image.max().item<double>() + 1e-6);
+}
+
+TEST_CASE("affinity filter gradients match finite differences") {
+  torch::manual_seed(12);
+  auto options = torch::TensorOptions().dtype(torch::kDouble);
+  std::vector<torch::Tensor> inputs = {
+      torch::rand({1, 2, 7, 6}, options), torch::randn({1, 3, 7, 6}, options),
+      torch::rand({1, 1, 7, 6}, options) + 0.2, torch::rand({1, 1, 7, 6}, options) + 0.2};
+  for (auto& input : inputs) input.requires_grad_(true);
+  const auto projection = torch::randn({1, 2, 7, 6}, options);
+  auto objective = [&] {
+    return (affinityFilter(inputs[0], inputs[1], inputs[2], inputs[3], 3, 2) * projection).sum();
+  };
+  objective().backward();
+  torch::NoGradGuard no_grad;
+  const double h = 1e-6;
+  for (auto& input : inputs)
+    for (int64_t index : {0, 5, 17, 41}) {
+      auto flat = input.view({-1});
+      if (index >= flat.numel()) continue;
+      const double saved = flat[index].item<double>();
+      flat[index] = saved + h;
+      const double up = objective().item<double>();
+      flat[index] = saved - h;
+      const double down = objective().item<double>();
+      flat[index] = saved;
+      CHECK(input.grad().view({-1})[index].item<double>() ==
+            doctest::Approx((up - down) / (2 * h)).epsilon(1e-5));
+    }
 }
 
 TEST_CASE("gradients reach every parameter") {

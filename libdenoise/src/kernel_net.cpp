@@ -25,26 +25,43 @@ torch::nn::Sequential convPair(int64_t in, int64_t out) {
                                nn::conv3x3(out, out), torch::nn::LeakyReLU(options));
 }
 
+// The k x k neighbourhoods, spaced `dilation` apart, of rows [y0, y0 + rows) of
+// a zero-padded (B,C,H+2r,W+2r) tensor, as (B,C,k,k,rows,W). Without autograd a
+// strided view (no copy, twice as fast as im2col); with it unfold, whose
+// backward is faster than that of an overlapping strided view.
+torch::Tensor neighbourhoods(const torch::Tensor& padded, int64_t kernel_size, int64_t dilation,
+                             int64_t y0, int64_t rows, int64_t width) {
+  const auto band = padded.narrow(2, y0, rows + 2 * dilation * (kernel_size / 2));
+  const std::vector<int64_t> shape = {band.size(0), band.size(1), kernel_size,
+                                      kernel_size,  rows,         width};
+  if (torch::GradMode::is_enabled())
+    return F::unfold(band, F::UnfoldFuncOptions(kernel_size).dilation(dilation)).view(shape);
+  const auto s = band.strides();
+  return band.as_strided(shape, {s[0], s[1], dilation * s[2], dilation * s[3], s[2], s[3]},
+                         band.storage_offset());
+}
+
 // Rows [y0, y0 + rows) of one filtering pass over zero-padded inputs.
 torch::Tensor filterBand(const torch::Tensor& padded_image, const torch::Tensor& padded_features,
                          const torch::Tensor& padded_mask, const torch::Tensor& features,
                          const torch::Tensor& bandwidth, const torch::Tensor& centre,
                          int64_t kernel_size, int64_t dilation, int64_t y0, int64_t rows) {
-  const int64_t w = features.size(3), taps = kernel_size * kernel_size;
-  const int64_t span = rows + 2 * dilation * (kernel_size / 2);
-  const auto unfold = [&](const torch::Tensor& x) {
-    return F::unfold(x.narrow(2, y0, span), F::UnfoldFuncOptions(kernel_size).dilation(dilation))
-        .view({x.size(0), x.size(1), taps, rows, w});
+  const int64_t w = features.size(3), k = kernel_size;
+  const auto around = [&](const torch::Tensor& padded) {
+    return neighbourhoods(padded, k, dilation, y0, rows, w);
   };
-  const auto centre_features = features.narrow(2, y0, rows).unsqueeze(2);
-  const auto distance = (unfold(padded_features) - centre_features).pow(2).sum(1);  // (B,T,r,W)
-  const auto inside = unfold(padded_mask).squeeze(1);                               // (1,T,r,W)
-  auto weights = torch::exp(-bandwidth.narrow(2, y0, rows) * distance) * inside;
-  auto is_centre = torch::zeros({1, taps, 1, 1}, weights.options());
-  is_centre[0][taps / 2] = 1.0;
-  weights = weights * (1.0 - is_centre) + is_centre * centre.narrow(2, y0, rows);
-  weights = weights / weights.sum(1, true);
-  return (unfold(padded_image) * weights.unsqueeze(1)).sum(2);  // (B,C,r,W)
+  const auto rowsOf = [&](const torch::Tensor& x) { return x.narrow(2, y0, rows).unsqueeze(2); };
+  auto difference = around(padded_features) - rowsOf(features).unsqueeze(2);  // (B,D,k,k,r,W)
+  // Without autograd the big temporary can be squared in place.
+  difference = torch::GradMode::is_enabled() ? difference.square() : difference.mul_(difference);
+  const auto distance = difference.sum(1);             // (B,k,k,r,W)
+  const auto inside = around(padded_mask).squeeze(1);  // (1,k,k,r,W)
+  auto weights = torch::exp(-rowsOf(bandwidth) * distance) * inside;
+  auto is_centre = torch::zeros({1, k, k, 1, 1}, weights.options());
+  is_centre[0][k / 2][k / 2] = 1.0;
+  weights = weights * (1.0 - is_centre) + is_centre * rowsOf(centre);
+  weights = weights / weights.sum({1, 2}, true);
+  return (around(padded_image) * weights.unsqueeze(1)).sum({2, 3});  // (B,C,r,W)
 }
 
 std::string joinInts(const std::vector<int64_t>& values) {
