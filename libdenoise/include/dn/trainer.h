@@ -26,8 +26,8 @@ struct TrainBatch {
 
 struct TrainerOptions {
   double learning_rate = 2e-4;
-  int64_t halve_every = 0;  // halve the learning rate every this many steps (0: never)
-  double weight_decay = 0.0;
+  int64_t halve_every = 0;     // halve the learning rate every this many steps (0: never)
+  double weight_decay = 0.01;  // AdamW's usual default
   double ema_decay = 0.999;
   double max_grad_norm = 1.0;  // 0 disables clipping
   uint64_t seed = 0;
