@@ -5,6 +5,7 @@
 //   core_bench [--aux N] [--iters N] [--train-steps N] [--threads N] [--skip-large]
 //              [--skip-forward] [--base-channels N] [--res-blocks N] [--mults 1,2,4]
 //              [--attention 2|none] [--middle-attention 0|1] [--channels-last]
+//              [--flush-denormal]
 #include <ATen/CPUGeneratorImpl.h>
 
 #include <chrono>
@@ -164,6 +165,7 @@ struct Args {
   bool skip_large = false;
   bool skip_forward = false;
   bool channels_last = false;
+  bool flush_denormal = false;
 };
 
 // NHWC weights make oneDNN pick its blocked convolution kernels directly.
@@ -222,6 +224,8 @@ Args parseArgs(int argc, char** argv) {
       args.skip_forward = true;
     else if (arg == "--channels-last")
       args.channels_last = true;
+    else if (arg == "--flush-denormal")
+      args.flush_denormal = true;
     else {
       std::fprintf(stderr, "core_bench: unknown argument %s\n", arg.c_str());
       std::exit(2);
@@ -281,6 +285,7 @@ int main(int argc, char** argv) {
   torch::set_num_threads(args.threads > 0 ? args.threads
                                           : int(std::max(1u, std::thread::hardware_concurrency())));
   torch::manual_seed(0);
+  if (args.flush_denormal) at::globalContext().setFlushDenormal(true);
   ModelInfo info;
   if (args.res_blocks > 0) info.base.res_blocks = args.res_blocks;
   if (args.base_channels > 0) info.base.base_channels = args.base_channels;
