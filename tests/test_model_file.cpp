@@ -265,6 +265,10 @@ TEST_CASE("a checkpoint resumes training exactly") {
   other.control.hint_channels = 16;
   Trainer c(buildDenoiser(other), other, options);
   CHECK_THROWS_AS(c.loadCheckpoint(path), ModelError);
+  auto renoted = tinyInfo(true);  // notes carry fixed training settings
+  renoted.notes["train.batch"] = "16";
+  Trainer d(buildDenoiser(renoted), renoted, options);
+  CHECK_THROWS_AS(d.loadCheckpoint(path), ModelError);
   std::string bytes = readBytes(path);
   writeBytes(path, bytes.substr(0, bytes.size() / 2));
   CHECK_THROWS_AS(b.loadCheckpoint(path), ModelError);

@@ -122,12 +122,8 @@ void Trainer::saveCheckpoint(const std::string& path) {
 
 void Trainer::loadCheckpoint(const std::string& path) {
   auto file = readArchiveFile(path, "checkpoint");
-  // Notes may change between runs; the architecture and diffusion setup may not.
-  auto without_notes = [](ModelInfo info) {
-    info.notes.clear();
-    return modelInfoToText(info);
-  };
-  if (without_notes(modelInfoFromText(file.text, path)) != without_notes(info_))
+  // Notes included: apps record fixed training settings there (batch, crop, seed).
+  if (file.text != modelInfoToText(info_))
     throw ModelError(path + ": checkpoint was written for a different model configuration");
   try {
     torch::serialize::InputArchive model_archive, optimizer_archive, ema_archive;

@@ -61,7 +61,9 @@ class Trainer {
 
   // Everything needed to continue exactly: weights, optimizer, EMA, step, RNG.
   void saveCheckpoint(const std::string& path);
-  void loadCheckpoint(const std::string& path);  // throws ModelError
+  // Throws ModelError, also when the checkpoint's ModelInfo (notes included)
+  // differs from this trainer's.
+  void loadCheckpoint(const std::string& path);
   // A model file with the EMA weights (what inference should use).
   void saveEmaModel(const std::string& path);
 
