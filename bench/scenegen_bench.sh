@@ -19,9 +19,11 @@ for ((s = first; s < first + scenes; s++)); do
     { echo "scenegen_bench.sh: blender failed on seed $s:" >&2; tail -5 "$out/log_$s" >&2; exit 1; }
 done
 end=$(date +%s.%N)
-python3 - "$out" "$start" "$end" <<'PY'
+# CPU seconds of the Blender children (user + sys), from the shell's `times`.
+cpu=$(times | tail -1 | awk '{ for (i = 1; i <= 2; i++) { split($i, t, /[ms]/); s += 60 * t[1] + t[2] } print s }')
+python3 - "$out" "$start" "$end" "$cpu" "$threads" <<'PY'
 import glob, json, os, sys
-out, start, end = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+out, start, end, cpu, threads = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), int(sys.argv[5])
 metas = [json.load(open(p)) for p in sorted(glob.glob(os.path.join(out, "scene_*", "frame_*", "meta.json")))]
 wall = end - start
 gt = sum(v for m in metas for k, v in m["render_seconds"].items() if k.startswith("gt"))
@@ -36,4 +38,8 @@ print("stacks (%2d per frame):    %.1f s per frame (%.0f%% of wall), %.2f s per 
       % (metas[0]["stacks"], st / n, 100 * st / wall, st / n / metas[0]["stacks"]))
 print("startup, scene build, exposure probe: %.1f s total (%.0f%% of wall)"
       % (wall - frame_total, 100 * (wall - frame_total) / wall))
+# On a shared machine wall time depends on the load; CPU time does not (much).
+print("CPU time:                 %.1f s (%.0f%% of %d threads busy)" % (cpu, 100 * cpu / (wall * threads), threads))
+print("frames per hour if %d cores were free: %.1f" % (threads, 3600 * n / (cpu / threads)))
+print("load average at the end:  %s" % open("/proc/loadavg").read().split()[0])
 PY
