@@ -6,6 +6,7 @@
 #include <cstring>
 #include <string>
 
+#include "dn/buffers.h"
 #include "dn/dataset.h"
 
 using namespace dn::data;
@@ -33,18 +34,7 @@ int main(int argc, char** argv) {
   so.spp = {4};
   if (maxSpp >= 16) so.spp.push_back(16);
   if (maxSpp >= 64) so.spp.push_back(64);
-  so.aux = {"albedo",
-            "normal",
-            "depth",
-            "diffuse_direct",
-            "diffuse_indirect",
-            "diffuse_color",
-            "glossy_direct",
-            "glossy_indirect",
-            "glossy_color",
-            "transmission_direct",
-            "transmission_indirect",
-            "transmission_color"};
+  so.aux = dn::defaultAuxBuffers();
   so.crop = crop;
   LoaderOptions lo;
   lo.batchSize = batch;

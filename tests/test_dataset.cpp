@@ -215,18 +215,7 @@ TEST_CASE("the committed sample data set loads with every default buffer") {
   REQUIRE(!frames.empty());
   SampleOptions options;
   options.spp = {4, 16};
-  options.aux = {"albedo",
-                 "normal",
-                 "depth",
-                 "diffuse_direct",
-                 "diffuse_indirect",
-                 "diffuse_color",
-                 "glossy_direct",
-                 "glossy_indirect",
-                 "glossy_color",
-                 "transmission_direct",
-                 "transmission_indirect",
-                 "transmission_color"};
+  options.aux = dn::defaultAuxBuffers();
   options.crop = 32;
   auto frame = FrameData::load(frames[0], options);
   std::mt19937_64 rng(3);

@@ -49,6 +49,22 @@ const BufferSpec* findBufferSpec(const std::string& name) {
   return nullptr;
 }
 
+const std::vector<std::string>& defaultAuxBuffers() {
+  static const std::vector<std::string> buffers = {"albedo",
+                                                   "normal",
+                                                   "depth",
+                                                   "diffuse_direct",
+                                                   "diffuse_indirect",
+                                                   "diffuse_color",
+                                                   "glossy_direct",
+                                                   "glossy_indirect",
+                                                   "glossy_color",
+                                                   "transmission_direct",
+                                                   "transmission_indirect",
+                                                   "transmission_color"};
+  return buffers;
+}
+
 const Image& FrameBuffers::get(const std::string& name) const {
   auto it = buffers.find(name);
   if (it == buffers.end()) throw std::out_of_range("frame has no '" + name + "' buffer");

@@ -108,20 +108,4 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
   return torch::cat(parts, 1);
 }
 
-const std::vector<std::string>& defaultAuxBuffers() {
-  static const std::vector<std::string> buffers = {"albedo",
-                                                   "normal",
-                                                   "depth",
-                                                   "diffuse_direct",
-                                                   "diffuse_indirect",
-                                                   "diffuse_color",
-                                                   "glossy_direct",
-                                                   "glossy_indirect",
-                                                   "glossy_color",
-                                                   "transmission_direct",
-                                                   "transmission_indirect",
-                                                   "transmission_color"};
-  return buffers;
-}
-
 }  // namespace dn

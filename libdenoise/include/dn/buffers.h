@@ -27,6 +27,10 @@ struct BufferSpec {
 const std::vector<BufferSpec>& canonicalBuffers();
 const BufferSpec* findBufferSpec(const std::string& name);  // nullptr if unknown
 
+// The default model's aux inputs: what Blender/Cycles writes with Denoising Data
+// and the diffuse, glossy and transmission light passes (direct, indirect, colour).
+const std::vector<std::string>& defaultAuxBuffers();
+
 // One frame's buffers by canonical name. Every image has the same width/height.
 struct FrameBuffers {
   int width = 0;

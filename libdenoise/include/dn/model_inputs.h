@@ -8,6 +8,7 @@
 
 #include <torch/torch.h>
 
+#include "dn/buffers.h"  // defaultAuxBuffers()
 #include "dn/tonemap.h"
 
 namespace dn {
@@ -26,9 +27,5 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
 
 // Total channel count of the named canonical buffers; throws on an unknown name.
 int64_t auxChannelCount(const std::vector<std::string>& buffers);
-
-// The default model's inputs: what Blender/Cycles writes with Denoising Data and
-// the diffuse, glossy and transmission light passes (direct, indirect, colour).
-const std::vector<std::string>& defaultAuxBuffers();
 
 }  // namespace dn
