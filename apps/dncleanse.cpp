@@ -30,7 +30,7 @@ namespace {
 
 const char* kUsage = R"(usage: dncleanse train --data DIR --out MODEL [options]
        dncleanse apply --model MODEL --data DIR [--force] [--source a|b]
-       dncleanse IN.exr -o OUT.exr --model MODEL [--layer NAME] [--rgb]
+       dncleanse IN.exr -o OUT.exr --model MODEL [--layer NAME] [--rgb-only]
 
 A kernel-predicting network (Isik et al. 2021, no temporal terms) trained with
 SMAPE. --task cleanse (default) learns ground truth -> the other ground truth
@@ -67,7 +67,7 @@ apply options:
 single-file options:
   -o OUT                 output file: the input's layers plus the result layer
   --layer NAME           result layer (default Cleansed or Denoised, by the model's task)
-  --rgb                  write a plain RGB file instead
+  --rgb-only             write a plain RGB file instead
 exit codes: 0 ok, 1 bad input or arguments, 130/143 training stopped by SIGINT/SIGTERM
             (checkpoint written; continue with --resume)
 )";
@@ -86,6 +86,19 @@ std::string joined(const std::vector<std::string>& items) {
   std::string out;
   for (size_t i = 0; i < items.size(); ++i) out += (i ? "," : "") + items[i];
   return out;
+}
+
+// A JSON string literal (paths may hold quotes or backslashes).
+std::string jsonString(const std::string& text) {
+  std::string out = "\"";
+  for (const char c : text) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (static_cast<unsigned char>(c) < 0x20)
+      out += fmt::format("\\u{:04x}", int(c));
+    else
+      out += c;
+  }
+  return out + "\"";
 }
 
 std::string duration(double seconds) {
@@ -199,6 +212,8 @@ TrainOptions parseTrain(cli::Args& args) {
     throw IoError(o.out + ": the folder " + out_dir.string() + " does not exist");
   if (o.log.empty()) o.log = o.out + ".log.jsonl";
   if (o.checkpoint.empty()) o.checkpoint = o.out + ".ckpt";
+  if (!o.resume && fs::exists(o.checkpoint))
+    throw cli::UsageError(o.checkpoint + " exists: continue that run with --resume, or delete it");
   if (o.steps < 1 || o.batch < 1 || o.crop < 8 || o.threads < 1 || o.val_every < 0 ||
       o.val_samples < 1 || o.halve_every < 0 || !(o.lr > 0) || !(o.checkpoint_minutes > 0))
     throw cli::UsageError(
@@ -228,6 +243,8 @@ KernelModelInfo adoptCheckpoint(TrainOptions& o) {
                             stored->second + " (" + o.checkpoint + ")");
   }
   const auto& s = header.run_state;
+  for (const char* key : {"loader_position", "seconds"})
+    if (!s.count(key)) throw ModelError(o.checkpoint + ": checkpoint lacks '" + key + "'");
   o.data = s.at("data");
   o.batch = std::stoi(s.at("batch"));
   o.crop = std::stoi(s.at("crop"));
@@ -334,8 +351,8 @@ int runTrain(cli::Args& args) {
   JsonLog log(o.log);
   if (trainer.stepCount() == 0)
     log.write(fmt::format(
-        R"({{"event":"start","task":"{}","data":"{}","batch":{},"crop":{},"buffers":"{}"}})",
-        o.task, o.data, o.batch, o.crop, joined(info.net.input_buffers)));
+        R"({{"event":"start","task":"{}","data":{},"batch":{},"crop":{},"buffers":"{}"}})", o.task,
+        jsonString(o.data), o.batch, o.crop, joined(info.net.input_buffers)));
   else
     log.write(fmt::format(R"({{"event":"resume","step":{}}})", trainer.stepCount()));
 
@@ -357,8 +374,8 @@ int runTrain(cli::Args& args) {
     }());
     trainer.info().notes["steps"] = std::to_string(trainer.stepCount());
     trainer.saveModel(o.out);
-    log.write(fmt::format(R"({{"event":"checkpoint","step":{},"path":"{}"}})", trainer.stepCount(),
-                          o.checkpoint));
+    log.write(fmt::format(R"({{"event":"checkpoint","step":{},"path":{}}})", trainer.stepCount(),
+                          jsonString(o.checkpoint)));
     last_checkpoint = Clock::now();
   };
 
@@ -444,6 +461,7 @@ int runApply(cli::Args& args) {
   read.only = requiredBuffers(model.info.net);
   int written = 0, skipped = 0;
   const auto start = Clock::now();
+  const bool tty = ::isatty(STDERR_FILENO);
   for (size_t i = 0; i < frames.size(); ++i) {
     const fs::path dir(frames[i].dir);
     const auto out = (dir / "gt_clean.exr").string();
@@ -454,8 +472,12 @@ int runApply(cli::Args& args) {
     const auto frame = readFrame((dir / ("gt_" + source + ".exr")).string(), read);
     writeImage(out, runKernelNet(model.net, frame), false, {"R", "G", "B"});
     ++written;
-    std::fprintf(stderr, "frame %zu/%zu  %s\n", i + 1, frames.size(), out.c_str());
+    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    if (tty || written % 100 == 0 || i + 1 == frames.size())
+      std::fprintf(stderr, "%sframe %zu/%zu  %.2f s/frame%s", tty ? "\r" : "", i + 1, frames.size(),
+                   seconds / written, tty ? "\033[K" : "\n");
   }
+  if (tty && written > 0) std::fputs("\n", stderr);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   std::fprintf(stderr, "dncleanse: wrote %d gt_clean.exr, skipped %d existing (%s)\n", written,
                skipped, duration(seconds).c_str());
@@ -475,7 +497,7 @@ int runFile(cli::Args& args) {
       model_path = args.value("--model");
     else if (args.flag("--layer"))
       layer = args.value("--layer");
-    else if (args.flag("--rgb"))
+    else if (args.flag("--rgb-only"))
       rgb = true;
     else if (args.flag("--threads"))
       threads = args.intValue("--threads");

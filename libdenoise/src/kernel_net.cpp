@@ -16,6 +16,12 @@ namespace F = torch::nn::functional;
 
 // Keeps the kernel normaliser away from zero when every neighbour weight underflows.
 constexpr double kMinCentreWeight = 1e-4;
+// Features are unit vectors (|f_i - f_j|^2 <= 4) and bandwidths stay below this,
+// so a neighbour's weight never underflows to 0: unbounded, both grew without
+// limit in training until every kernel was exactly the identity and the
+// affinity gradients were exactly 0 (a dead network). exp(-4 * 20) ~ 2e-35.
+constexpr double kMaxBandwidth = 20.0;
+constexpr double kFeatureNormEps = 1e-6;
 
 constexpr double kLeakySlope = 0.1;
 
@@ -223,7 +229,7 @@ void KernelNetImpl::initializeWeights() {
       if (conv->bias.defined()) conv->bias.zero_();
     }
   torch::nn::init::kaiming_normal_(head->weight, 0.0, torch::kFanIn, torch::kLinear);
-  // Bandwidth softplus(0) = ln 2 and centre weight exactly 1 when the head input is 0.
+  // Bandwidth 1 and centre weight exactly 1 when the head input is 0.
   head->bias.zero_();
 }
 
@@ -265,8 +271,12 @@ std::vector<KernelGuide> KernelNetImpl::decodeGuides(const torch::Tensor& maps) 
   const int64_t d = config_.feature_dims;
   for (size_t i = 0; i < config_.dilations.size(); ++i) {
     const auto slice = maps.narrow(1, int64_t(i) * (d + 2), d + 2);
-    guides.push_back({slice.narrow(1, 0, d), F::softplus(slice.narrow(1, d, 1)),
-                      F::softplus(slice.narrow(1, d + 1, 1)) / std::log(2.0) + kMinCentreWeight});
+    const auto raw = slice.narrow(1, 0, d);
+    const auto features = raw * torch::rsqrt(raw.square().sum(1, true) + kFeatureNormEps);
+    const auto bandwidth =
+        kMaxBandwidth * torch::sigmoid(slice.narrow(1, d, 1) - std::log(kMaxBandwidth - 1));
+    const auto centre = F::softplus(slice.narrow(1, d + 1, 1)) / std::log(2.0) + kMinCentreWeight;
+    guides.push_back({features, bandwidth, centre});
   }
   return guides;
 }

@@ -54,7 +54,9 @@ torch::Tensor affinityFilter(const torch::Tensor& image, const torch::Tensor& fe
                              int64_t kernel_size, int64_t dilation,
                              int64_t band_elements = kDefaultBandElements);
 
-// Per-iteration kernel parameters decoded from the network's guide maps.
+// Per-iteration kernel parameters decoded from the network's guide maps:
+// unit-length features, bandwidth in (0, 20) (1 when the raw output is 0),
+// centre weight softplus(raw) / ln 2 (1 when the raw output is 0).
 struct KernelGuide {
   torch::Tensor features, bandwidth, centre;
 };
