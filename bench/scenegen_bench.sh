@@ -19,8 +19,9 @@ for ((s = first; s < first + scenes; s++)); do
     { echo "scenegen_bench.sh: blender failed on seed $s:" >&2; tail -5 "$out/log_$s" >&2; exit 1; }
 done
 end=$(date +%s.%N)
-# CPU seconds of the Blender children (user + sys), from the shell's `times`.
-cpu=$(times | tail -1 | awk '{ for (i = 1; i <= 2; i++) { split($i, t, /[ms]/); s += 60 * t[1] + t[2] } print s }')
+# CPU seconds of the Blender children (user + sys): `times` must run in this shell, not a subshell.
+times >"$out/times"
+cpu=$(tail -1 "$out/times" | awk '{ for (i = 1; i <= 2; i++) { split($i, t, /[ms]/); s += 60 * t[1] + t[2] } print s }')
 python3 - "$out" "$start" "$end" "$cpu" "$threads" <<'PY'
 import glob, json, os, sys
 out, start, end, cpu, threads = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), int(sys.argv[5])
