@@ -5,8 +5,9 @@
 //   core_bench [--aux N] [--iters N] [--train-steps N] [--threads N] [--skip-large]
 //              [--skip-forward] [--base-channels N] [--res-blocks N] [--mults 1,2,4]
 //              [--attention 2|none] [--middle-attention 0|1] [--channels-last]
-//              [--flush-denormal]
+//              [--flush-denormal] [--profile TRACE.json]
 #include <ATen/CPUGeneratorImpl.h>
+#include <torch/csrc/autograd/profiler_legacy.h>
 
 #include <chrono>
 #include <cstdio>
@@ -166,6 +167,7 @@ struct Args {
   bool skip_forward = false;
   bool channels_last = false;
   bool flush_denormal = false;
+  std::string profile;  // chrome trace of the control training steps
 };
 
 // NHWC weights make oneDNN pick its blocked convolution kernels directly.
@@ -226,6 +228,8 @@ Args parseArgs(int argc, char** argv) {
       args.channels_last = true;
     else if (arg == "--flush-denormal")
       args.flush_denormal = true;
+    else if (arg == "--profile")
+      args.profile = text();
     else {
       std::fprintf(stderr, "core_bench: unknown argument %s\n", arg.c_str());
       std::exit(2);
@@ -366,8 +370,13 @@ int main(int argc, char** argv) {
   const double extra = controlExtraFlops(uc, info.control, 64, 64).flops;
   const double control_train = (enc + dec) + (enc + extra) * 3 + dec;
   const double base_train = 3 * (enc + dec);
-  benchTraining("control (frozen base)", *controlled, info, args.aux, control_train,
-                args.train_steps, peak);
+  {
+    std::unique_ptr<torch::autograd::profiler::RecordProfile> profiler;
+    if (!args.profile.empty())
+      profiler = std::make_unique<torch::autograd::profiler::RecordProfile>(args.profile);
+    benchTraining("control (frozen base)", *controlled, info, args.aux, control_train,
+                  args.train_steps, peak);
+  }
   auto base_only = std::make_shared<PriorDenoiser>(std::make_shared<UNet>(uc));
   if (args.channels_last) toChannelsLast(*base_only);
   ModelInfo base_info = info;

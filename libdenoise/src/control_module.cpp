@@ -32,12 +32,13 @@ ControlModule::ControlModule(const ControlConfig& config, std::shared_ptr<PriorE
   register_module("encoder", encoder_);
   const auto skips = encoder_->skipChannels();
   for (size_t i = 0; i < skips.size(); ++i) {
-    auto conv = nn::conv1x1(skips[i], skips[i]);
+    auto conv = nn::PointwiseConv(skips[i], skips[i]);
     nn::zeroParameters(*conv);
     skip_zero_convs_.push_back(register_module("zero_conv" + std::to_string(i), conv));
   }
-  middle_zero_conv_ = register_module(
-      "middle_zero_conv", nn::conv1x1(encoder_->middleChannels(), encoder_->middleChannels()));
+  middle_zero_conv_ =
+      register_module("middle_zero_conv",
+                      nn::PointwiseConv(encoder_->middleChannels(), encoder_->middleChannels()));
   nn::zeroParameters(*middle_zero_conv_);
 }
 

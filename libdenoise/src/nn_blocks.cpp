@@ -41,6 +41,19 @@ torch::nn::Conv2d conv1x1(int64_t in, int64_t out) {
   return torch::nn::Conv2d(torch::nn::Conv2dOptions(in, out, 1));
 }
 
+PointwiseConvImpl::PointwiseConvImpl(int64_t in, int64_t out) {
+  auto reference = conv1x1(in, out);  // for Conv2d's exact initialisation
+  weight = register_parameter("weight", reference->weight.detach().clone());
+  bias = register_parameter("bias", reference->bias.detach().clone());
+}
+
+torch::Tensor PointwiseConvImpl::forward(const torch::Tensor& x) {
+  // Dilation does not change a 1x1 convolution, but it makes LibTorch choose
+  // oneDNN for the forward and backward pass instead of its BLAS-based path.
+  namespace F = torch::nn::functional;
+  return F::conv2d(x, weight, F::Conv2dFuncOptions().bias(bias).dilation(2));
+}
+
 TimestepMlpImpl::TimestepMlpImpl(int64_t base_channels_, int64_t embedding_channels)
     : base_channels(base_channels_) {
   fc1 = register_module("fc1", torch::nn::Linear(base_channels, embedding_channels));
@@ -65,7 +78,7 @@ ResBlockImpl::ResBlockImpl(int64_t in_channels, int64_t out_channels, int64_t em
     embedding_proj =
         register_module("embedding_proj", torch::nn::Linear(embedding_channels, 2 * out_channels));
   if (in_channels != out_channels)
-    skip = register_module("skip", conv1x1(in_channels, out_channels));
+    skip = register_module("skip", PointwiseConv(in_channels, out_channels));
 }
 
 torch::Tensor ResBlockImpl::forward(const torch::Tensor& x, const torch::Tensor& embedding) {
@@ -85,8 +98,8 @@ AttentionBlockImpl::AttentionBlockImpl(int64_t channels, int64_t head_channels, 
   TORCH_CHECK(channels % heads == 0, "attention channels must split evenly into heads");
   norm = register_module("norm", torch::nn::GroupNorm(torch::nn::GroupNormOptions(
                                      groupCount(channels, norm_groups), channels)));
-  qkv = register_module("qkv", conv1x1(channels, 3 * channels));
-  proj = register_module("proj", conv1x1(channels, channels));
+  qkv = register_module("qkv", PointwiseConv(channels, 3 * channels));
+  proj = register_module("proj", PointwiseConv(channels, channels));
   zeroParameters(*proj);
 }
 

@@ -10,6 +10,7 @@
 
 #include <torch/torch.h>
 
+#include "dn/nn_blocks.h"
 #include "dn/prior.h"
 
 namespace dn {
@@ -34,8 +35,8 @@ class ControlModule : public torch::nn::Module {
   ControlConfig config_;
   torch::nn::Sequential hint_{nullptr};
   std::shared_ptr<PriorEncoder> encoder_;
-  std::vector<torch::nn::Conv2d> skip_zero_convs_;
-  torch::nn::Conv2d middle_zero_conv_{nullptr};
+  std::vector<nn::PointwiseConv> skip_zero_convs_;
+  nn::PointwiseConv middle_zero_conv_{nullptr};
 };
 
 // Frozen base prior + trainable Control Module. The base's parameters never get

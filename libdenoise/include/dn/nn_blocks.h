@@ -23,6 +23,17 @@ void zeroParameters(torch::nn::Module& module);
 torch::nn::Conv2d conv3x3(int64_t in, int64_t out, int64_t stride = 1, int64_t dilation = 1);
 torch::nn::Conv2d conv1x1(int64_t in, int64_t out);
 
+// A 1x1 convolution with Conv2d's parameter names, shapes and initialisation
+// that always runs on oneDNN. LibTorch 1.13 sends 1x1 convolutions of batches
+// under 16 on one thread to an im2col + BLAS path, and Debian links reference
+// (netlib) BLAS: there they took over half of a training step.
+struct PointwiseConvImpl : torch::nn::Module {
+  PointwiseConvImpl(int64_t in, int64_t out);
+  torch::Tensor forward(const torch::Tensor& x);
+  torch::Tensor weight, bias;
+};
+TORCH_MODULE(PointwiseConv);
+
 // Maps a timestep embedding of `base_channels` to `embedding_channels` (Linear, SiLU, Linear).
 struct TimestepMlpImpl : torch::nn::Module {
   TimestepMlpImpl(int64_t base_channels, int64_t embedding_channels);
@@ -42,7 +53,8 @@ struct ResBlockImpl : torch::nn::Module {
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& embedding = {});
 
   torch::nn::GroupNorm norm1{nullptr}, norm2{nullptr};
-  torch::nn::Conv2d conv1{nullptr}, conv2{nullptr}, skip{nullptr};
+  torch::nn::Conv2d conv1{nullptr}, conv2{nullptr};
+  PointwiseConv skip{nullptr};
   torch::nn::Linear embedding_proj{nullptr};
 };
 TORCH_MODULE(ResBlock);
@@ -55,7 +67,7 @@ struct AttentionBlockImpl : torch::nn::Module {
 
   int64_t heads;
   torch::nn::GroupNorm norm{nullptr};
-  torch::nn::Conv2d qkv{nullptr}, proj{nullptr};
+  PointwiseConv qkv{nullptr}, proj{nullptr};
 };
 TORCH_MODULE(AttentionBlock);
 
