@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <thread>
 
 #include "common/cli.h"
 #include "common/sequence.h"
@@ -90,6 +91,7 @@ Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
   o.model = defaultModelPath();
+  torch::set_num_threads(static_cast<int>(std::thread::hardware_concurrency()));  // LibTorch starts with 1
   while (!args.done()) {
     std::string a = args.peek();
     if (args.flag("-h", "--help")) {

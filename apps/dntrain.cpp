@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <thread>
 
 #include "common/cli.h"
 #include "dn/buffer_io.h"
@@ -266,7 +267,8 @@ std::string validate(Trainer& trainer, const TrainBatch& val, tonemap::Curve cur
 }
 
 int run(const Options& o) {
-  if (o.threads > 0) torch::set_num_threads(o.threads);
+  // Debian's LibTorch starts with one thread: use every core unless told otherwise.
+  torch::set_num_threads(o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency()));
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 
