@@ -116,7 +116,7 @@ def main():
     src = os.path.join(data, "val", "scene_000000", "frame_0", "gt_a.exr")
     results = {}
     for name in ("full", "split"):
-        out = run([tool, src, "-o", p(f"{name}.exr"), "--model", p(f"{name}.pt"), "--rgb"])
+        out = run([tool, src, "-o", p(f"{name}.exr"), "--model", p(f"{name}.pt"), "--rgb-only"])
         check(f"one file with {name}.pt: exit 0", out.returncode == 0, out.stderr)
         results[name] = read_rgb(p(f"{name}.exr"))
     diff = float(np.abs(results["full"] - results["split"]).max())
@@ -212,6 +212,8 @@ def main():
                  p("fresh.pt.ckpt"), p("fresh.pt"))
     expect_error(tool, "resume with another batch size",
                  ["train", "--out", p("split.pt"), "--resume", "--batch", "4"], p("split.pt.ckpt"))
+    expect_error(tool, "fresh run over an existing checkpoint",
+                 ["train", "--data", data, "--out", p("split.pt"), "--steps", "1"] + NET, p("split.pt.ckpt"))
     expect_error(tool, "apply with a denoise model", ["apply", "--model", p("isik.pt"), "--data", data],
                  p("isik.pt"))
     expect_error(tool, "unknown buffer", ["train", "--data", data, "--out", p("y.pt"), "--buffers", "nope"],
