@@ -146,7 +146,7 @@ TEST_CASE("the network with a zero head filters like iterated box filters") {
   KernelNet net(tinyConfig());
   {
     torch::NoGradGuard no_grad;
-    net->head->weight.zero_();  // features all 0, bandwidth ln 2, centre weight 1
+    net->head->weight.zero_();  // features all 0, bandwidth 1, centre weight 1
   }
   auto radiance = torch::rand({1, 3, 14, 10}) * 4;
   auto aux = torch::rand({1, 6, 14, 10});
@@ -216,6 +216,25 @@ TEST_CASE("gradients reach every parameter") {
   for (const auto& item : net->named_parameters()) {
     INFO(item.key());
     REQUIRE(item.value().grad().defined());
+    CHECK(item.value().grad().abs().sum().item<double>() > 0.0);
+  }
+}
+
+TEST_CASE("kernels never die: a saturated head still passes gradients") {
+  // Huge head outputs push every bandwidth to its bound and features far apart;
+  // neighbour weights must stay above 0 so training can come back.
+  torch::manual_seed(13);
+  KernelNet net(tinyConfig());
+  {
+    torch::NoGradGuard no_grad;
+    net->head->weight.mul_(1e4);
+  }
+  auto radiance = torch::rand({1, 3, 16, 16}) * 3;
+  auto out = net->forward(radiance, torch::rand({1, 6, 16, 16}));
+  CHECK(torch::isfinite(out).all().item<bool>());
+  kernelNetLoss(out, torch::rand({1, 3, 16, 16}), 1e-2).backward();
+  for (const auto& item : net->named_parameters()) {
+    INFO(item.key());
     CHECK(item.value().grad().abs().sum().item<double>() > 0.0);
   }
 }
@@ -361,5 +380,5 @@ TEST_CASE("Noise2Noise training on noisy stripes lowers the error against the cl
   MESSAGE("SMAPE vs clean: noisy " << noisy_error << ", at init " << before << ", trained "
                                    << after);
   CHECK(before < noisy_error);  // even the initial kernels average noise away
-  CHECK(after < 0.8 * before);  // learning to stop at the albedo edges does better
+  CHECK(after < 0.85 * before);  // learning to stop at the albedo edges does better
 }
