@@ -70,27 +70,6 @@ torch::Tensor filterBand(const torch::Tensor& padded_image, const torch::Tensor&
   return (around(padded_image) * weights.unsqueeze(1)).sum({2, 3});  // (B,C,r,W)
 }
 
-std::string joinInts(const std::vector<int64_t>& values) {
-  std::string text;
-  for (size_t i = 0; i < values.size(); ++i) text += (i ? "," : "") + std::to_string(values[i]);
-  return text;
-}
-
-std::string joinStrings(const std::vector<std::string>& values) {
-  std::string text;
-  for (size_t i = 0; i < values.size(); ++i) text += (i ? "," : "") + values[i];
-  return text;
-}
-
-std::vector<std::string> splitList(const std::string& text) {
-  std::vector<std::string> items;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ','))
-    if (!item.empty()) items.push_back(item);
-  return items;
-}
-
 // key=value lines; every lookup failure is a ModelError naming the file.
 struct Metadata {
   std::map<std::string, std::string> values;

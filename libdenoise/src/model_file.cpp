@@ -32,27 +32,6 @@ std::string hex64(uint64_t value) {
   return out.str();
 }
 
-std::string joinInts(const std::vector<int64_t>& values) {
-  std::string text;
-  for (size_t i = 0; i < values.size(); ++i) text += (i ? "," : "") + std::to_string(values[i]);
-  return text;
-}
-
-std::string joinStrings(const std::vector<std::string>& values) {
-  std::string text;
-  for (size_t i = 0; i < values.size(); ++i) text += (i ? "," : "") + values[i];
-  return text;
-}
-
-std::vector<std::string> splitList(const std::string& text) {
-  std::vector<std::string> items;
-  if (text.empty()) return items;
-  std::stringstream stream(text);
-  std::string item;
-  while (std::getline(stream, item, ',')) items.push_back(item);
-  return items;
-}
-
 // Reads key=value metadata with typed accessors that report the file and key.
 class KeyValues {
  public:
@@ -162,6 +141,27 @@ void writeAtomically(const std::string& path, const std::function<void(std::ostr
 }
 
 }  // namespace
+
+std::string joinInts(const std::vector<int64_t>& values) {
+  std::string text;
+  for (size_t i = 0; i < values.size(); ++i) text += (i ? "," : "") + std::to_string(values[i]);
+  return text;
+}
+
+std::string joinStrings(const std::vector<std::string>& values) {
+  std::string text;
+  for (size_t i = 0; i < values.size(); ++i) text += (i ? "," : "") + values[i];
+  return text;
+}
+
+std::vector<std::string> splitList(const std::string& text) {
+  std::vector<std::string> items;
+  std::stringstream stream(text);
+  std::string item;
+  while (std::getline(stream, item, ','))
+    if (!item.empty()) items.push_back(item);
+  return items;
+}
 
 std::string modelInfoToText(const ModelInfo& info) {
   std::ostringstream out;

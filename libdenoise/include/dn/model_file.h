@@ -43,6 +43,11 @@ struct ModelInfo {
   NoiseSchedule samplingSchedule() const { return respace(trainingSchedule(), respacing); }
 };
 
+// Comma-separated lists in model metadata ("1,2,4", "albedo,normal"); empty items are dropped.
+std::string joinInts(const std::vector<int64_t>& values);
+std::string joinStrings(const std::vector<std::string>& values);
+std::vector<std::string> splitList(const std::string& text);
+
 std::string modelInfoToText(const ModelInfo& info);
 // `source` names the file in error messages; throws ModelError.
 ModelInfo modelInfoFromText(const std::string& text, const std::string& source);
