@@ -17,24 +17,14 @@ import OpenEXR
 
 sys.path.insert(0, os.path.dirname(__file__))
 from exr_numpy import read_rgb, write_rgb  # noqa: E402
+from cli_checks import check, expect_error, run, summary  # noqa: E402
 
-failures = 0
-checks = 0
 
 # A small network and the buffers the synthetic frames have.
 NET = ["--buffers", "albedo,normal", "--widths", "8,8", "--dilations", "1,2", "--feature-dims", "4"]
 RUN = ["--batch", "2", "--crop", "16", "--threads", "1", "--lr", "3e-3"]
 
 
-def check(label, ok, detail=""):
-    global failures, checks
-    checks += 1
-    failures += not ok
-    print(f"{'ok  ' if ok else 'FAIL'} {label}{'' if ok else ': ' + detail}", flush=True)
-
-
-def run(cmd, **kw):
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=300, **kw)
 
 
 def write_frame(path, color, albedo, normal):
@@ -65,15 +55,6 @@ def make_dataset(root, rng, size=24):
             with open(os.path.join(d, "meta.json"), "w") as f:
                 f.write("{}\n")
 
-
-def expect_error(tool, label, args, must_name, no_file=None):
-    out = run([tool] + args)
-    lines = out.stderr.strip().splitlines()
-    check(f"{label}: exit 1", out.returncode == 1, f"exit {out.returncode}, stderr {out.stderr!r}")
-    check(f"{label}: one line naming {os.path.basename(must_name)}",
-          len(lines) == 1 and must_name in lines[0], repr(out.stderr))
-    if no_file:
-        check(f"{label}: no output file", not os.path.exists(no_file), no_file)
 
 
 def log_events(path):
@@ -190,39 +171,38 @@ def main():
         f.write(model)
     with open(p("garbage.exr"), "wb") as f:
         f.write(b"not an image at all")
-    expect_error(tool, "missing model", [src, "-o", p("x1.exr"), "--model", p("nope.pt")],
+    expect_error("missing model", [tool, src, "-o", p("x1.exr"), "--model", p("nope.pt")],
                  p("nope.pt"), p("x1.exr"))
-    expect_error(tool, "corrupt model", [src, "-o", p("x2.exr"), "--model", p("corrupt.pt")],
+    expect_error("corrupt model", [tool, src, "-o", p("x2.exr"), "--model", p("corrupt.pt")],
                  p("corrupt.pt"), p("x2.exr"))
-    expect_error(tool, "diffusion checkpoint as model",
-                 [src, "-o", p("x3.exr"), "--model", p("full.pt.ckpt")], p("full.pt.ckpt"), p("x3.exr"))
-    expect_error(tool, "input lacks the model's buffers",
-                 [p("plain.exr"), "-o", p("x4.exr"), "--model", p("full.pt")], p("plain.exr"), p("x4.exr"))
-    expect_error(tool, "unreadable input", [p("garbage.exr"), "-o", p("x5.exr"), "--model", p("full.pt")],
+    expect_error("diffusion checkpoint as model",
+                 [tool, src, "-o", p("x3.exr"), "--model", p("full.pt.ckpt")], p("full.pt.ckpt"), p("x3.exr"))
+    expect_error("input lacks the model's buffers",
+                 [tool, p("plain.exr"), "-o", p("x4.exr"), "--model", p("full.pt")], p("plain.exr"), p("x4.exr"))
+    expect_error("unreadable input", [tool, p("garbage.exr"), "-o", p("x5.exr"), "--model", p("full.pt")],
                  p("garbage.exr"), p("x5.exr"))
-    expect_error(tool, "missing input", [p("absent.exr"), "-o", p("x6.exr"), "--model", p("full.pt")],
+    expect_error("missing input", [tool, p("absent.exr"), "-o", p("x6.exr"), "--model", p("full.pt")],
                  p("absent.exr"), p("x6.exr"))
-    expect_error(tool, "output over the input", [src, "-o", src, "--model", p("full.pt")], src)
+    expect_error("output over the input", [tool, src, "-o", src, "--model", p("full.pt")], src)
     check("output over the input: input unchanged", open(src, "rb").read() == before)
-    expect_error(tool, "missing data set", ["train", "--data", p("nodata"), "--out", p("y.pt")] + NET,
+    expect_error("missing data set", [tool, "train", "--data", p("nodata"), "--out", p("y.pt")] + NET,
                  p("nodata"), p("y.pt"))
-    expect_error(tool, "output folder missing", ["train", "--data", data, "--out", p("no", "y.pt")],
+    expect_error("output folder missing", [tool, "train", "--data", data, "--out", p("no", "y.pt")],
                  p("no", "y.pt"))
-    expect_error(tool, "resume without checkpoint", ["train", "--out", p("fresh.pt"), "--resume"],
+    expect_error("resume without checkpoint", [tool, "train", "--out", p("fresh.pt"), "--resume"],
                  p("fresh.pt.ckpt"), p("fresh.pt"))
-    expect_error(tool, "resume with another batch size",
-                 ["train", "--out", p("split.pt"), "--resume", "--batch", "4"], p("split.pt.ckpt"))
-    expect_error(tool, "fresh run over an existing checkpoint",
-                 ["train", "--data", data, "--out", p("split.pt"), "--steps", "1"] + NET, p("split.pt.ckpt"))
-    expect_error(tool, "apply with a denoise model", ["apply", "--model", p("isik.pt"), "--data", data],
+    expect_error("resume with another batch size",
+                 [tool, "train", "--out", p("split.pt"), "--resume", "--batch", "4"], p("split.pt.ckpt"))
+    expect_error("fresh run over an existing checkpoint",
+                 [tool, "train", "--data", data, "--out", p("split.pt"), "--steps", "1"] + NET, p("split.pt.ckpt"))
+    expect_error("apply with a denoise model", [tool, "apply", "--model", p("isik.pt"), "--data", data],
                  p("isik.pt"))
-    expect_error(tool, "unknown buffer", ["train", "--data", data, "--out", p("y.pt"), "--buffers", "nope"],
+    expect_error("unknown buffer", [tool, "train", "--data", data, "--out", p("y.pt"), "--buffers", "nope"],
                  "nope", p("y.pt"))
-    expect_error(tool, "unknown option", [src, "-o", p("x7.exr"), "--model", p("full.pt"), "--bogus"],
+    expect_error("unknown option", [tool, src, "-o", p("x7.exr"), "--model", p("full.pt"), "--bogus"],
                  "--bogus", p("x7.exr"))
 
-    print(f"{checks - failures}/{checks} checks passed")
-    return 1 if failures else 0
+    return summary()
 
 
 if __name__ == "__main__":

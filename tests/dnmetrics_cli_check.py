@@ -12,30 +12,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
 from exr_numpy import write_rgb  # noqa: E402
-
-failures = 0
-checks = 0
+from cli_checks import check, expect_error, run, summary  # noqa: E402
 
 
-def check(label, ok, detail=""):
-    global failures, checks
-    checks += 1
-    failures += not ok
-    print(f"{'ok  ' if ok else 'FAIL'} {label}{'' if ok else ': ' + detail}")
 
 
-def run(cmd):
-    return subprocess.run(cmd, capture_output=True, text=True)
-
-
-def expect_error(tool, label, args, must_name, code=1, no_file=None):
-    out = run([tool] + args)
-    lines = out.stderr.strip().splitlines()
-    check(f"{label}: exit {code}", out.returncode == code, f"exit {out.returncode}, stderr {out.stderr!r}")
-    check(f"{label}: one line naming {os.path.basename(must_name)}",
-          len(lines) == 1 and must_name in lines[0], repr(out.stderr))
-    if no_file:
-        check(f"{label}: no output file", not os.path.exists(no_file), no_file)
 
 
 def main():
@@ -92,24 +73,23 @@ def main():
     out = run([tool, "--maxerror", "l1=10", "--maxerror", "psnr=1", p("ref.exr"), p("noisy.exr")])
     check("--maxerror passes with exit 0", out.returncode == 0, out.stderr)
 
-    expect_error(tool, "missing file", [p("ref.exr"), p("missing.exr")], p("missing.exr"))
-    expect_error(tool, "not an image", [p("ref.exr"), p("text.exr")], p("text.exr"))
-    expect_error(tool, "truncated EXR", [p("ref.exr"), p("cut.exr")], p("cut.exr"))
-    expect_error(tool, "absent channels", ["--test-channels", "diffuse.R,diffuse.G,diffuse.B",
+    expect_error("missing file", [tool, p("ref.exr"), p("missing.exr")], p("missing.exr"))
+    expect_error("not an image", [tool, p("ref.exr"), p("text.exr")], p("text.exr"))
+    expect_error("truncated EXR", [tool, p("ref.exr"), p("cut.exr")], p("cut.exr"))
+    expect_error("absent channels", [tool, "--test-channels", "diffuse.R,diffuse.G,diffuse.B",
                                            p("ref.exr"), p("noisy.exr")], "diffuse.R")
-    expect_error(tool, "mismatched sizes", [p("ref.exr"), p("small.exr")], p("small.exr"))
-    expect_error(tool, "NaN/Inf pixels", ["--heatmap", p("nanheat.png"), p("ref.exr"), p("nan.exr")],
+    expect_error("mismatched sizes", [tool, p("ref.exr"), p("small.exr")], p("small.exr"))
+    expect_error("NaN/Inf pixels", [tool, "--heatmap", p("nanheat.png"), p("ref.exr"), p("nan.exr")],
                  p("nan.exr"), no_file=p("nanheat.png"))
-    expect_error(tool, "truncated EXR with heatmap", ["--heatmap", p("cutheat.png"), p("ref.exr"), p("cut.exr")],
+    expect_error("truncated EXR with heatmap", [tool, "--heatmap", p("cutheat.png"), p("ref.exr"), p("cut.exr")],
                  p("cut.exr"), no_file=p("cutheat.png"))
     os.remove(p("test", "b.exr"))
-    expect_error(tool, "folder with a missing file", [p("ref"), p("test")], "b.exr")
+    expect_error("folder with a missing file", [tool, p("ref"), p("test")], "b.exr")
 
     out = run([tool, "--nonfinite", "zero", "--format", "json", p("ref.exr"), p("nan.exr")])
     check("--nonfinite zero counts and reports", out.returncode == 0 and "2 NaN/Inf" in out.stderr, out.stderr)
 
-    print(f"{checks - failures} passed, {failures} failed")
-    return 1 if failures else 0
+    return summary()
 
 
 if __name__ == "__main__":

@@ -17,22 +17,13 @@ try:
     import OpenEXR
     sys.path.insert(0, os.path.dirname(__file__))
     from exr_numpy import read_rgb, write_rgb
+    from cli_checks import check, expect_error, run, summary
 except ImportError as e:  # CTest reports this as skipped
     print(f"skipped: {e}")
     sys.exit(77)
 
-checks = failures = 0
 
 
-def check(label, ok, detail=""):
-    global checks, failures
-    checks += 1
-    failures += not ok
-    print(f"{'ok  ' if ok else 'FAIL'} {label}{'' if ok else ': ' + str(detail)[:2000]}", flush=True)
-
-
-def run(cmd, **kw):
-    return subprocess.run(cmd, capture_output=True, text=True, **kw)
 
 
 def channels_of(path):
@@ -44,15 +35,6 @@ def log_losses(path):
     with open(path) as f:
         return {j["step"]: j["loss"] for j in map(json.loads, f)}
 
-
-def expect_error(label, cmd, must_name, no_file=None, code=1):
-    out = run(cmd)
-    lines = out.stderr.strip().splitlines()
-    check(f"{label}: exit {code}", out.returncode == code, f"exit {out.returncode}: {out.stderr}")
-    check(f"{label}: one line naming {os.path.basename(must_name)}", len(lines) == 1 and must_name in lines[0],
-          out.stderr)
-    if no_file:
-        check(f"{label}: nothing written", not os.path.exists(no_file), no_file)
 
 
 def main():
@@ -186,8 +168,7 @@ def main():
     expect_error("output is the input", base_cmd + [frame, "-o", frame], frame)
     check("input untouched", open(frame, "rb").read() == before)
 
-    print(f"{checks - failures} passed, {failures} failed")
-    return 1 if failures else 0
+    return summary()
 
 
 if __name__ == "__main__":
