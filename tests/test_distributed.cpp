@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const char* kWorkerEnv = "DN_TEST_DISTRIBUTED_WORKER";  // "rank world port output"
+const char* kWorkerEnv = "DN_TEST_DISTRIBUTED_WORKER";  // "rank world port output|quit"
 const char* kWorkerCase = "two-process worker";
 constexpr int64_t kBatch = 4;
 
@@ -127,6 +127,7 @@ TEST_CASE("two-process worker" * doctest::skip()) {
   torch::set_num_threads(1);
 
   GradientAverager averager(localOptions(rank, world, port));
+  if (std::string(output) == "quit") return;  // a rank that stops right after joining
   auto net = tinyNet(100 + rank);
   averager.broadcastParameters(net->parameters());
   const int64_t share = kBatch / world;
@@ -233,4 +234,23 @@ TEST_CASE("rank 0 alone is an error after the connect timeout") {
   CAPTURE(what);
   CHECK(what.rfind("distributed: only 1 of 2 ranks joined 127.0.0.1:", 0) == 0);
   CHECK(what.find("within 1.5 s") != std::string::npos);
+}
+
+TEST_CASE("a rank that stops makes the next collective an error, not a hang") {
+  const int port = freePort();
+  const pid_t rank1 = spawnWorker(1, 2, port, "quit");
+  GradientAverager averager(localOptions(0, 2, port));
+  REQUIRE(waitForWorker(rank1, std::chrono::seconds(60)) == 0);
+  auto net = tinyNet(3);
+  gradients(net, 0, kBatch);
+  std::string what;
+  try {
+    averager.averageGradients(net->parameters());
+  } catch (const std::runtime_error& error) {
+    what = error.what();
+  }
+  CAPTURE(what);
+  CHECK(what.rfind("distributed: rank 0: gradient averaging failed, another rank has probably "
+                   "stopped (",
+                   0) == 0);
 }

@@ -167,6 +167,17 @@ void unflattenInto(const torch::Tensor& flat, const std::vector<torch::Tensor>& 
   }
 }
 
+// Runs one collective to completion; a rank that died or hung shows up here.
+void complete(const c10::intrusive_ptr<c10d::Work>& work, const DistributedOptions& o,
+              const char* what) {
+  try {
+    work->wait();
+  } catch (const std::exception& error) {
+    throw distributedError("rank " + std::to_string(o.rank) + ": " + what +
+                           " failed, another rank has probably stopped (" + firstLine(error) + ")");
+  }
+}
+
 }  // namespace
 
 GradientAverager::GradientAverager(const DistributedOptions& options) : options_(options) {
@@ -196,7 +207,7 @@ void GradientAverager::averageGradients(const std::vector<torch::Tensor>& params
   if (grads.empty()) return;
   torch::NoGradGuard noGrad;
   std::vector<torch::Tensor> buffer{flatten(grads)};
-  group_->group->allreduce(buffer)->wait();
+  complete(group_->group->allreduce(buffer), options_, "gradient averaging");
   buffer[0].div_(options_.world_size);
   unflattenInto(buffer[0], grads);
 }
@@ -205,26 +216,27 @@ void GradientAverager::broadcastParameters(const std::vector<torch::Tensor>& par
   if (!group_ || params.empty()) return;
   torch::NoGradGuard noGrad;
   std::vector<torch::Tensor> buffer{flatten(params)};
-  group_->group->broadcast(buffer)->wait();
+  complete(group_->group->broadcast(buffer), options_, "broadcast from rank 0");
   unflattenInto(buffer[0], params);
 }
 
 double GradientAverager::average(double value) {
   if (!group_) return value;
   std::vector<torch::Tensor> buffer{torch::tensor({value}, torch::kDouble)};
-  group_->group->allreduce(buffer)->wait();
+  complete(group_->group->allreduce(buffer), options_, "averaging a value");
   return buffer[0].item<double>() / options_.world_size;
 }
 
 bool GradientAverager::any(bool flag) {
   if (!group_) return flag;
   std::vector<torch::Tensor> buffer{torch::tensor({flag ? 1 : 0}, torch::kInt)};
-  group_->group->allreduce(buffer, c10d::AllreduceOptions{c10d::ReduceOp::MAX})->wait();
+  complete(group_->group->allreduce(buffer, c10d::AllreduceOptions{c10d::ReduceOp::MAX}), options_,
+           "exchanging a flag");
   return buffer[0].item<int>() > 0;
 }
 
 void GradientAverager::barrier() {
-  if (group_) group_->group->barrier()->wait();
+  if (group_) complete(group_->group->barrier(), options_, "barrier");
 }
 
 }  // namespace dn
