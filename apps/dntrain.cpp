@@ -1,6 +1,7 @@
 // dntrain: trains the diffusion denoiser.
 //   dntrain base    --data DIR --photos DIR --out base.dnm     pretrain the prior
 //   dntrain control --data DIR --base base.dnm --out model.dnm  train the Control Module
+//   dntrain regression --data DIR --base base.dnm --out reg.dnm the single-pass ablation
 #include <fmt/format.h>
 #include <torch/torch.h>
 
@@ -32,16 +33,20 @@ namespace {
 const char* kUsage =
     R"(usage: dntrain base    --data DIR [--photos DIR ...] --out base.dnm [options]
        dntrain control --data DIR --base base.dnm --out model.dnm [options]
+       dntrain regression --data DIR --base base.dnm --out reg.dnm [options]
 
 base     pretrains the pixel-space prior on clean images (the data set's ground
          truths and photographs) conditioned on a degraded copy of each.
 control  freezes a pretrained prior and trains the Control Module on the data
          set's low-spp renders and feature buffers against the clean targets.
+regression  the ablation: the same networks (prior + Control Module, initialised
+         from the prior, all weights trained) map the render to the clean image
+         in one pass, trained with L1; dndenoise runs it in one network step.
 
 options:
   --data DIR            data set root (docs/dataset.md); training uses split 'train'
   --photos DIR          folder of photographs for the prior (repeatable)
-  --base FILE           pretrained prior (control)
+  --base FILE           pretrained prior (control, regression)
   --out FILE            model file written at the end (EMA weights)
   --aux LIST|default|none  control inputs (default: Denoising Data + diffuse/glossy/
                         transmission light passes); none = the radiance-only ablation
@@ -141,11 +146,11 @@ Options parseArgs(int argc, char** argv) {
     else
       throw cli::UsageError("unexpected argument '" + args.peek() + "'");
   }
-  if (o.mode != "base" && o.mode != "control")
-    throw cli::UsageError("first argument must be base or control (see --help)");
+  if (o.mode != "base" && o.mode != "control" && o.mode != "regression")
+    throw cli::UsageError("first argument must be base, control or regression (see --help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
-  if (o.mode == "control" && (o.base.empty() || o.data.empty()))
-    throw cli::UsageError("control needs --base and --data");
+  if (o.mode != "base" && (o.base.empty() || o.data.empty()))
+    throw cli::UsageError(o.mode + " needs --base and --data");
   if (o.mode == "base" && o.data.empty() && o.photos.empty())
     throw cli::UsageError("base needs --data and/or --photos");
   if (o.batch < 1 || o.crop < 16 || o.steps < 1)
@@ -186,6 +191,12 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
     info.notes["default_skip"] = std::to_string(o.defaultSkip >= 0 ? o.defaultSkip : 18);
     info.notes["base_model"] = fs::path(o.base).filename().string();
     model = std::make_shared<ControlledDenoiser>(base.prior(), info.control);
+    if (o.mode == "regression") {
+      info.objective = Objective::Regression;
+      info.prediction = Prediction::X0;
+      info.notes["default_skip"] = "0";
+      for (auto& parameter : model->parameters()) parameter.set_requires_grad(true);
+    }
   }
   info.notes["train.mode"] = o.mode;
   info.notes["train.batch"] = std::to_string(o.batch);
@@ -218,7 +229,7 @@ class BatchSource {
   }
 
   TrainBatch batch(int64_t step) {
-    if (o_.mode == "control") return toTrainBatch(loader_->next(), info_.input_buffers, curve_);
+    if (o_.mode != "base") return toTrainBatch(loader_->next(), info_.input_buffers, curve_);
     // base: clean images from renders and photographs, conditioned on a degraded copy.
     auto generator =
         at::detail::createCPUGenerator(o_.seed * 1000003 + static_cast<uint64_t>(step));
@@ -245,11 +256,19 @@ class BatchSource {
 // [0, 6] radiance and PSNR on Reinhard, for the result and for the input.
 std::string validate(Trainer& trainer, const TrainBatch& val, tonemap::Curve curve) {
   const ModelInfo& info = trainer.info();
-  SamplerOptions so;
-  so.seed = 7;
-  so.skip_steps = std::stoll(info.notes.at("default_skip"));
-  torch::Tensor out = denoiseTonemapped(*trainer.model(), info.samplingSchedule(), info.prediction,
-                                        val.noisy, val.aux, so);
+  torch::Tensor out;
+  if (info.objective == Objective::Regression) {
+    torch::NoGradGuard noGrad;
+    trainer.model()->eval();
+    out = tonemappedFromModelSpace(
+        regressDirect(*trainer.model(), modelSpaceFromTonemapped(val.noisy), val.aux).clamp(-1, 1));
+  } else {
+    SamplerOptions so;
+    so.seed = 7;
+    so.skip_steps = std::stoll(info.notes.at("default_skip"));
+    out = denoiseTonemapped(*trainer.model(), info.samplingSchedule(), info.prediction, val.noisy,
+                            val.aux, so);
+  }
   auto hdr = [&](const torch::Tensor& t) { return inverseTonemapRadiance(t, curve); };
   auto l1 = [](const torch::Tensor& a, const torch::Tensor& b) {
     return (a - b).abs().mean().item<double>();
@@ -268,7 +287,8 @@ std::string validate(Trainer& trainer, const TrainBatch& val, tonemap::Curve cur
 
 int run(const Options& o) {
   // Debian's LibTorch starts with one thread: use every core unless told otherwise.
-  torch::set_num_threads(o.threads > 0 ? o.threads : static_cast<int>(std::thread::hardware_concurrency()));
+  torch::set_num_threads(o.threads > 0 ? o.threads
+                                       : static_cast<int>(std::thread::hardware_concurrency()));
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 

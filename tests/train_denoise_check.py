@@ -82,6 +82,15 @@ def main():
     check("resumed losses equal the uninterrupted run's at every step", straight == resumed,
           f"{straight} vs {resumed}")
 
+    # The single-pass regression ablation: trains from the prior, dndenoise runs it in one step.
+    out = run([dntrain, "regression", "--data", data, "--base", p("base.dnm"), "--steps", "3", "--val-every", "3",
+               "--out", p("regression.dnm")] + tiny)
+    check("dntrain regression: exit 0 and a model file", out.returncode == 0 and os.path.exists(p("regression.dnm")),
+          out.stderr)
+    with open(p("regression.dnm.log.jsonl")) as f:
+        lines = [json.loads(line) for line in f]
+    check("dntrain regression: L1 validation logged", len(lines) == 3 and "val_l1" in lines[-1], lines)
+
     model = p("straight.dnm")
     frame = os.path.join(data, "val", "scene_0", "frame_0", "spp4_00.exr")
     ref = os.path.join(data, "val", "scene_0", "frame_0", "gt_a.exr")
@@ -94,6 +103,10 @@ def main():
           set(channels_of(frame)) <= set(chans) and "ViewLayer.Denoised.R" in chans, sorted(chans))
     denoised = read_rgb(p("out.exr"), "ViewLayer.Denoised")
     check("output is finite and HDR-ranged", np.isfinite(denoised).all() and denoised.min() >= 0, denoised.max())
+
+    out = run([dndenoise, "--model", p("regression.dnm"), "--threads", "1", "-v", frame, "-o", p("reg.exr")])
+    check("dndenoise runs the regression model in one network step", out.returncode == 0 and "1 step" in out.stderr
+          and np.isfinite(read_rgb(p("reg.exr"), "ViewLayer.Denoised")).all(), out.stderr)
 
     run(base_cmd + [frame, "-o", p("again.exr")])
     check("same seed, same output, bit for bit",

@@ -81,9 +81,12 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   const NoiseSchedule schedule = options.respacing.empty()
                                      ? mi.samplingSchedule()
                                      : respace(mi.trainingSchedule(), options.respacing);
+  const bool regression = mi.objective == Objective::Regression;
   const int64_t skip = options.skip >= 0 ? options.skip : defaultSkip(mi);
   startStep(schedule, skip);  // validates skip against the step count
-  const int64_t steps = schedule.size() - skip;
+  const int64_t steps = regression ? 1 : schedule.size() - skip;
+  // A regression model is deterministic: more samples would be identical copies.
+  const int samples = regression ? 1 : options.samples;
 
   const int64_t multiple = model_.model->sizeMultiple();
   const int64_t tile = options.tile > 0
@@ -96,9 +99,14 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
       return net.predict(v[0], t, v[1], v[2]);
     });
   };
-
-  torch::Tensor sum, sumSquares;
-  for (int k = 0; k < options.samples; ++k) {
+  auto sampleOnce = [&](int k) {
+    if (regression) {
+      auto x0 = tiler.apply({cond, aux}, [&](const std::vector<torch::Tensor>& v) {
+        return regressDirect(net, v[0], v[1]);
+      });
+      if (options.progress) options.progress(1.0);
+      return x0.clamp(-1.0, 1.0);
+    }
     SamplerOptions so;
     so.kind = options.sampler;
     so.eta = options.eta;
@@ -106,19 +114,23 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
     so.seed = options.seed + static_cast<uint64_t>(k);
     if (options.progress)
       so.progress = [&, k](int64_t done, int64_t total) {
-        options.progress((k + double(done) / total) / options.samples);
+        options.progress((k + double(done) / total) / samples);
       };
-    torch::Tensor x0 = sample(schedule, mi.prediction, fn, cond, so);
-    torch::Tensor hdr = inverseTonemapRadiance(tonemappedFromModelSpace(x0), curve);
+    return sample(schedule, mi.prediction, fn, cond, so);
+  };
+
+  torch::Tensor sum, sumSquares;
+  for (int k = 0; k < samples; ++k) {
+    torch::Tensor hdr = inverseTonemapRadiance(tonemappedFromModelSpace(sampleOnce(k)), curve);
     sum = k == 0 ? hdr.clone() : sum + hdr;
     sumSquares = k == 0 ? hdr * hdr : sumSquares + hdr * hdr;
   }
 
   DenoiseResult result;
-  const double n = options.samples;
+  const double n = samples;
   torch::Tensor mean = sum / n;
   result.color = tensorToImage(mean);
-  if (options.samples > 1) {
+  if (samples > 1) {
     torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
     result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
   }

@@ -185,8 +185,10 @@ std::string modelInfoToText(const ModelInfo& info) {
         << "control.hint_layers=" << c.hint_layers << "\n";
   }
   out << "input_buffers=" << joinStrings(info.input_buffers) << "\n"
-      << "tonemap=" << info.tonemap << "\n"
-      << "prediction=" << predictionName(info.prediction) << "\n"
+      << "tonemap=" << info.tonemap << "\n";
+  // Written only when not the default, so diffusion files stay as they were.
+  if (info.objective == Objective::Regression) out << "objective=regression\n";
+  out << "prediction=" << predictionName(info.prediction) << "\n"
       << "schedule=" << scheduleKindName(info.schedule) << "\n"
       << "schedule_steps=" << info.schedule_steps << "\n"
       << "respacing=" << info.respacing << "\n";
@@ -223,6 +225,11 @@ ModelInfo modelInfoFromText(const std::string& text, const std::string& source) 
   }
   info.input_buffers = splitList(kv.text("input_buffers"));
   info.tonemap = kv.text("tonemap");
+  if (kv.has("objective")) {
+    const std::string objective = kv.text("objective");
+    if (objective != "regression") kv.fail("unknown objective '" + objective + "'");
+    info.objective = Objective::Regression;
+  }
   info.schedule_steps = kv.integer("schedule_steps");
   info.respacing = kv.text("respacing");
   try {

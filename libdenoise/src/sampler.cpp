@@ -97,6 +97,11 @@ torch::Tensor sample(const NoiseSchedule& schedule, Prediction prediction, const
   return z;
 }
 
+torch::Tensor regressDirect(ConditionalDenoiser& model, const torch::Tensor& cond,
+                            const torch::Tensor& aux) {
+  return model.predict(cond, torch::zeros({cond.size(0)}), cond, aux);
+}
+
 torch::Tensor denoiseTonemapped(ConditionalDenoiser& model, const NoiseSchedule& schedule,
                                 Prediction prediction, const torch::Tensor& radiance,
                                 const torch::Tensor& aux, const SamplerOptions& options) {

@@ -37,6 +37,13 @@ torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& sch
   return torch::mse_loss(output, predictionTarget(prediction, x0, noise, alpha_bar));
 }
 
+torch::Tensor regressionLoss(ConditionalDenoiser& model, const TrainBatch& batch) {
+  checkBatch(batch);
+  const auto x0 = modelSpaceFromTonemapped(batch.target);
+  const auto output = regressDirect(model, modelSpaceFromTonemapped(batch.noisy), batch.aux);
+  return torch::l1_loss(output, x0);
+}
+
 Trainer::Trainer(std::shared_ptr<ConditionalDenoiser> model, ModelInfo info, TrainerOptions options)
     : model_(std::move(model)),
       info_(std::move(info)),
@@ -63,21 +70,26 @@ StepStats Trainer::step(const TrainBatch& batch) {
   for (auto& group : optimizer_->param_groups())
     static_cast<torch::optim::AdamWOptions&>(group.options()).lr(lr);
   optimizer_->zero_grad();
-  auto loss = diffusionLoss(*model_, schedule_, info_.prediction, batch, generator_);
-  loss.backward();
+  auto value = loss(batch, generator_);
+  value.backward();
   if (options_.max_grad_norm > 0)
     torch::nn::utils::clip_grad_norm_(trainable_, options_.max_grad_norm);
   optimizer_->step();
   ++step_;
   updateEma();
-  return {step_, loss.item<double>(), lr};
+  return {step_, value.item<double>(), lr};
 }
 
 double Trainer::evaluate(const TrainBatch& batch, uint64_t seed) {
   torch::NoGradGuard no_grad;
   model_->eval();
   auto generator = at::detail::createCPUGenerator(seed);
-  return diffusionLoss(*model_, schedule_, info_.prediction, batch, generator).item<double>();
+  return loss(batch, generator).item<double>();
+}
+
+torch::Tensor Trainer::loss(const TrainBatch& batch, torch::Generator& generator) {
+  if (info_.objective == Objective::Regression) return regressionLoss(*model_, batch);
+  return diffusionLoss(*model_, schedule_, info_.prediction, batch, generator);
 }
 
 void Trainer::updateEma() {

@@ -27,12 +27,18 @@ class ModelError : public std::runtime_error {
 
 constexpr int kModelFormatVersion = 1;
 
+// Diffusion: the iterative sampler of the paper. Regression: the same networks
+// trained with L1 to map the noisy render to the clean image in one pass (the
+// ablation that tells whether diffusion earns its cost).
+enum class Objective { Diffusion, Regression };
+
 struct ModelInfo {
   UNetConfig base;
   bool has_control = true;  // false: the base prior alone (pretraining, ablations)
   ControlConfig control;
   std::vector<std::string> input_buffers;  // canonical buffer names feeding aux, in order
   std::string tonemap = "log";             // curve name of dn::tonemap (radiance -> model range)
+  Objective objective = Objective::Diffusion;
   Prediction prediction = Prediction::Epsilon;
   ScheduleKind schedule = ScheduleKind::Cosine;
   int64_t schedule_steps = 1000;

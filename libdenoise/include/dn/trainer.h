@@ -45,6 +45,9 @@ torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& sch
                             Prediction prediction, const TrainBatch& batch,
                             torch::Generator& generator);
 
+// The regression ablation's loss: L1 between regressDirect's output and the target.
+torch::Tensor regressionLoss(ConditionalDenoiser& model, const TrainBatch& batch);
+
 class Trainer {
  public:
   // `info` describes `model` (it is written into checkpoints and model files).
@@ -68,6 +71,8 @@ class Trainer {
   void saveEmaModel(const std::string& path);
 
  private:
+  // The loss of info_.objective on one batch.
+  torch::Tensor loss(const TrainBatch& batch, torch::Generator& generator);
   void updateEma();
   void swapEma();
 
