@@ -22,6 +22,11 @@ constexpr double kMinCentreWeight = 1e-4;
 // affinity gradients were exactly 0 (a dead network). exp(-4 * 20) ~ 2e-35.
 constexpr double kMaxBandwidth = 20.0;
 constexpr double kFeatureNormEps = 1e-6;
+// The centre weight is bounded too: unbounded, raising it everywhere was the
+// cheapest way out of the initial blur and training ended at the identity, where
+// the affinities get no gradient. With this bound a pixel keeps itself only by
+// making its neighbours' features differ (texture and geometry edges).
+constexpr double kMaxCentreWeight = 4.0;
 
 constexpr double kLeakySlope = 0.1;
 
@@ -254,7 +259,9 @@ std::vector<KernelGuide> KernelNetImpl::decodeGuides(const torch::Tensor& maps) 
     const auto features = raw * torch::rsqrt(raw.square().sum(1, true) + kFeatureNormEps);
     const auto bandwidth =
         kMaxBandwidth * torch::sigmoid(slice.narrow(1, d, 1) - std::log(kMaxBandwidth - 1));
-    const auto centre = F::softplus(slice.narrow(1, d + 1, 1)) / std::log(2.0) + kMinCentreWeight;
+    const auto centre = kMaxCentreWeight * torch::sigmoid(slice.narrow(1, d + 1, 1) -
+                                                          std::log(kMaxCentreWeight - 1)) +
+                        kMinCentreWeight;
     guides.push_back({features, bandwidth, centre});
   }
   return guides;
