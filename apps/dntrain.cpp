@@ -11,6 +11,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -19,6 +20,7 @@
 #include "common/cli.h"
 #include "dn/buffer_io.h"
 #include "dn/control_module.h"
+#include "dn/distributed.h"
 #include "dn/model_inputs.h"
 #include "dn/sampler.h"
 #include "dn/trainer.h"
@@ -64,6 +66,11 @@ options:
   --checkpoint-minutes M  checkpoint interval (default 5)
   --resume              continue from the checkpoint if it exists (same data order)
   --threads N           CPU threads for the network and the loader
+  --world-size N --rank R  data-parallel training over N processes (default 1 0):
+                        each rank draws its own --batch (global batch N x batch) and
+                        gradients are averaged; rank 0 writes log, checkpoint, model
+  --master-addr HOST --master-port P  where rank 0 listens (default 127.0.0.1 29500)
+                        without these flags: env WORLD_SIZE, RANK, MASTER_ADDR, MASTER_PORT
   -h, --help
 Ctrl-C (SIGINT) or SIGTERM saves a checkpoint and exits with code 130.
 )";
@@ -82,11 +89,31 @@ struct Options {
   uint64_t seed = 1;
   int threads = 0;
   bool resume = false;
+  int worldSize = 1, rank = 0, masterPort = 29500;
+  std::string masterAddr = "127.0.0.1";
 };
+
+// The launcher convention (torchrun's names) as defaults for the distributed flags.
+void distributedDefaultsFromEnvironment(Options& o) {
+  auto env = [](const char* name) {
+    return std::getenv(name) ? std::string(std::getenv(name)) : "";
+  };
+  if (!env("WORLD_SIZE").empty()) o.worldSize = cli::Args::toInt("WORLD_SIZE", env("WORLD_SIZE"));
+  if (!env("RANK").empty()) o.rank = cli::Args::toInt("RANK", env("RANK"));
+  if (!env("MASTER_ADDR").empty()) o.masterAddr = env("MASTER_ADDR");
+  if (!env("MASTER_PORT").empty())
+    o.masterPort = cli::Args::toInt("MASTER_PORT", env("MASTER_PORT"));
+}
+
+// Rank 0 keeps the single-process data stream; the others draw their own.
+uint64_t rankSeed(uint64_t seed, int rank) {
+  return rank == 0 ? seed : seed + 0x9E3779B97F4A7C15ull * static_cast<uint64_t>(rank);
+}
 
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
+  distributedDefaultsFromEnvironment(o);
   while (!args.done()) {
     if (args.flag("-h", "--help")) {
       std::fputs(kUsage, stdout);
@@ -139,6 +166,14 @@ Options parseArgs(int argc, char** argv) {
       o.resume = true;
     else if (args.flag("--threads"))
       o.threads = args.intValue("--threads");
+    else if (args.flag("--world-size"))
+      o.worldSize = args.intValue("--world-size");
+    else if (args.flag("--rank"))
+      o.rank = args.intValue("--rank");
+    else if (args.flag("--master-addr"))
+      o.masterAddr = args.value("--master-addr");
+    else if (args.flag("--master-port"))
+      o.masterPort = args.intValue("--master-port");
     else if (args.peek().size() > 1 && args.peek()[0] == '-')
       throw cli::UsageError("unknown option '" + args.peek() + "' (see --help)");
     else if (o.mode.empty())
@@ -202,6 +237,7 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
   info.notes["train.batch"] = std::to_string(o.batch);
   info.notes["train.crop"] = std::to_string(o.crop);
   info.notes["train.seed"] = std::to_string(o.seed);
+  if (o.worldSize > 1) info.notes["train.world_size"] = std::to_string(o.worldSize);
   if (!model) model = buildDenoiser(info);
   return {info, model};
 }
@@ -210,7 +246,10 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
 class BatchSource {
  public:
   BatchSource(const Options& o, const ModelInfo& info, const std::string& split, int64_t startStep)
-      : o_(o), info_(info), curve_(tonemap::curveFromName(info.tonemap)) {
+      : o_(o),
+        info_(info),
+        seed_(rankSeed(o.seed, o.rank)),
+        curve_(tonemap::curveFromName(info.tonemap)) {
     if (!o.photos.empty()) photos_ = std::make_unique<PhotoSource>(o.photos);
     if (!o.data.empty()) {
       data::SampleOptions so;
@@ -220,7 +259,7 @@ class BatchSource {
       so.crop = static_cast<int>(o.crop);
       data::LoaderOptions lo;
       lo.batchSize = static_cast<int>(renderedPerBatch());
-      lo.seed = o.seed;
+      lo.seed = seed_;
       lo.threads = 2;
       loader_ = std::make_unique<data::Loader>(
           data::scanDataset(o.data, split), so, lo,
@@ -231,8 +270,7 @@ class BatchSource {
   TrainBatch batch(int64_t step) {
     if (o_.mode != "base") return toTrainBatch(loader_->next(), info_.input_buffers, curve_);
     // base: clean images from renders and photographs, conditioned on a degraded copy.
-    auto generator =
-        at::detail::createCPUGenerator(o_.seed * 1000003 + static_cast<uint64_t>(step));
+    auto generator = at::detail::createCPUGenerator(seed_ * 1000003 + static_cast<uint64_t>(step));
     std::vector<torch::Tensor> clean;
     if (loader_) clean.push_back(targetTensor(loader_->next()));
     if (photos_) clean.push_back(photos_->draw(o_.batch - renderedPerBatch(), o_.crop, generator));
@@ -247,6 +285,7 @@ class BatchSource {
   }
   const Options& o_;
   const ModelInfo& info_;
+  uint64_t seed_;
   tonemap::Curve curve_;
   std::unique_ptr<PhotoSource> photos_;
   std::unique_ptr<data::Loader> loader_;
@@ -289,6 +328,15 @@ int run(const Options& o) {
   // Debian's LibTorch starts with one thread: use every core unless told otherwise.
   torch::set_num_threads(o.threads > 0 ? o.threads
                                        : static_cast<int>(std::thread::hardware_concurrency()));
+  // Joins the other ranks first, so bad distributed settings fail before any
+  // loading (and Ctrl-C while waiting for them simply ends the process).
+  DistributedOptions dist;
+  dist.world_size = o.worldSize;
+  dist.rank = o.rank;
+  dist.master_addr = o.masterAddr;
+  dist.master_port = o.masterPort;
+  auto averager = std::make_shared<GradientAverager>(dist);
+  const bool isMain = averager->isMain();  // only rank 0 writes and prints
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 
@@ -301,13 +349,15 @@ int run(const Options& o) {
   Trainer trainer(model, info, to);
   if (o.resume && fs::exists(o.checkpoint)) {
     trainer.loadCheckpoint(o.checkpoint);
-    fmt::print(stderr, "dntrain: resumed {} at step {}\n", o.checkpoint, trainer.stepCount());
+    if (isMain)
+      fmt::print(stderr, "dntrain: resumed {} at step {}\n", o.checkpoint, trainer.stepCount());
   }
+  if (o.worldSize > 1) trainer.setGradientAverager(averager);
 
   BatchSource source(o, trainer.info(), "train", trainer.stepCount());
   // A fixed validation batch: from the 'val' split when there is one.
   std::optional<TrainBatch> val;
-  if (o.valEvery > 0) {
+  if (o.valEvery > 0 && isMain) {
     Options vo = o;
     vo.seed = 12345;
     vo.batch = std::min<int64_t>(o.batch, 4);
@@ -315,26 +365,31 @@ int run(const Options& o) {
     val = BatchSource(vo, trainer.info(), hasVal ? "val" : "train", 0).batch(0);
   }
 
-  std::ofstream log(o.log, std::ios::app);
-  if (!log) throw IoError(o.log + ": cannot open the log for writing");
+  std::ofstream log;
+  if (isMain) log.open(o.log, std::ios::app);
+  if (isMain && !log) throw IoError(o.log + ": cannot open the log for writing");
   const auto start = Clock::now();
   auto lastCheckpoint = start;
   const int64_t firstStep = trainer.stepCount();
-  fmt::print(
-      stderr, "dntrain {}: {} trainable parameters, steps {} -> {}\n", o.mode,
-      [&] {
-        int64_t n = 0;
-        for (const auto& p : model->parameters()) n += p.requires_grad() ? p.numel() : 0;
-        return n;
-      }(),
-      firstStep, o.steps);
+  const int64_t globalBatch = o.batch * o.worldSize;
+  if (isMain)
+    fmt::print(
+        stderr, "dntrain {}: {} trainable parameters, steps {} -> {}\n", o.mode,
+        [&] {
+          int64_t n = 0;
+          for (const auto& p : model->parameters()) n += p.requires_grad() ? p.numel() : 0;
+          return n;
+        }(),
+        firstStep, o.steps);
 
-  while (trainer.stepCount() < o.steps && !stopRequested) {
+  bool stop = false;  // agreed by all ranks, so they leave the loop together
+  while (trainer.stepCount() < o.steps && !(stop = averager->any(stopRequested))) {
     TrainBatch batch = source.batch(trainer.stepCount());
     StepStats stats = trainer.step(batch);
     const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-    const double rate = (stats.step - firstStep) * o.batch / elapsed;
-    const double eta = (o.steps - stats.step) * o.batch / std::max(rate, 1e-9);
+    if (!isMain) continue;
+    const double rate = (stats.step - firstStep) * globalBatch / elapsed;
+    const double eta = (o.steps - stats.step) * globalBatch / std::max(rate, 1e-9);
     log << fmt::format(
         "{{\"step\": {}, \"loss\": {:.6g}, \"lr\": {:.3g}, \"samples_per_s\": {:.3f}, "
         "\"elapsed_s\": {:.1f}",
@@ -350,9 +405,10 @@ int run(const Options& o) {
       lastCheckpoint = Clock::now();
     }
   }
+  if (!isMain) return stop ? 130 : cli::kExitOk;
   fmt::print(stderr, "\n");
   trainer.saveCheckpoint(o.checkpoint);
-  if (stopRequested) {
+  if (stop) {
     fmt::print(stderr,
                "dntrain: interrupted at step {}; checkpoint {} saved (continue with --resume)\n",
                trainer.stepCount(), o.checkpoint);

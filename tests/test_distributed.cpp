@@ -14,6 +14,8 @@
 #include <thread>
 
 #include "dn/distributed.h"
+#include "dn/model_file.h"
+#include "dn/trainer.h"
 
 extern char** environ;
 
@@ -22,7 +24,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const char* kWorkerEnv = "DN_TEST_DISTRIBUTED_WORKER";  // "rank world port output|quit"
+const char* kWorkerEnv = "DN_TEST_DISTRIBUTED_WORKER";  // "rank world port mode output"
 const char* kWorkerCase = "two-process worker";
 constexpr int64_t kBatch = 4;
 
@@ -82,14 +84,16 @@ DistributedOptions localOptions(int rank, int world, int port) {
 }
 
 // Starts this test binary as one worker rank; returns its pid.
-pid_t spawnWorker(int rank, int world, int port, const std::string& output) {
+pid_t spawnWorker(int rank, int world, int port, const std::string& mode,
+                  const std::string& output) {
   const std::string exe = fs::read_symlink("/proc/self/exe").string();
   std::string selectCase = std::string("--test-case=") + kWorkerCase;
   std::string noSkip = "--no-skip";
   std::vector<char*> argv{const_cast<char*>(exe.c_str()), selectCase.data(), noSkip.data(),
                           nullptr};
   std::vector<std::string> env{std::string(kWorkerEnv) + "=" + std::to_string(rank) + " " +
-                               std::to_string(world) + " " + std::to_string(port) + " " + output};
+                               std::to_string(world) + " " + std::to_string(port) + " " + mode +
+                               " " + output};
   std::vector<char*> envp{env[0].data()};
   for (char** e = environ; *e; ++e) envp.push_back(*e);
   envp.push_back(nullptr);
@@ -113,35 +117,80 @@ int waitForWorker(pid_t pid, std::chrono::seconds limit) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+constexpr int kTrainerSteps = 2;
+
+// A tiny prior trained with the regression objective: no diffusion noise, so
+// ranks and a single process see exactly the same loss on the same images.
+ModelInfo tinyRegressionInfo() {
+  ModelInfo info;
+  info.base.base_channels = 8;
+  info.base.channel_mults = {1, 2};
+  info.base.res_blocks = 1;
+  info.base.attention_levels = {1};
+  info.base.head_channels = 8;
+  info.base.norm_groups = 4;
+  info.has_control = false;
+  info.objective = Objective::Regression;
+  info.prediction = Prediction::X0;
+  return info;
+}
+
+std::shared_ptr<ConditionalDenoiser> tinyDenoiser(uint64_t seed) {
+  torch::manual_seed(seed);
+  return buildDenoiser(tinyRegressionInfo());
+}
+
+TrainBatch fixedTrainBatch() {
+  torch::manual_seed(9);
+  auto target = torch::rand({kBatch, 3, 8, 8});
+  auto noisy = (target + 0.2 * torch::randn({kBatch, 3, 8, 8})).clamp(0, 1);
+  return {noisy, {}, target};
+}
+
 }  // namespace
 
-// Run only as a child of the two-process test (skipped otherwise): starts from
-// its own rank-specific weights, takes rank 0's by broadcast, computes
-// gradients on its half of the batch, averages them and saves them.
+// Run only as a child of the two-process tests (skipped otherwise), in one mode:
+//   gradients  start from rank-specific weights, take rank 0's by broadcast,
+//              average the gradients of this rank's half of the batch, save them
+//   trainer    two Trainer steps on this rank's half of the batch, save the weights
+//   quit       stop right after joining
 TEST_CASE("two-process worker" * doctest::skip()) {
   const char* spec = std::getenv(kWorkerEnv);
   REQUIRE(spec != nullptr);
   int rank = 0, world = 0, port = 0;
-  char output[4096] = {};
-  REQUIRE(std::sscanf(spec, "%d %d %d %4095s", &rank, &world, &port, output) == 4);
+  char mode[32] = {}, output[4096] = {};
+  REQUIRE(std::sscanf(spec, "%d %d %d %31s %4095s", &rank, &world, &port, mode, output) == 5);
   torch::set_num_threads(1);
-
-  GradientAverager averager(localOptions(rank, world, port));
-  if (std::string(output) == "quit") return;  // a rank that stops right after joining
-  auto net = tinyNet(100 + rank);
-  averager.broadcastParameters(net->parameters());
+  auto averager = std::make_shared<GradientAverager>(localOptions(rank, world, port));
   const int64_t share = kBatch / world;
-  gradients(net, rank * share, share);
-  averager.averageGradients(net->parameters());
-  CHECK(averager.average(rank + 1.0) == doctest::Approx((world + 1) / 2.0));
-  CHECK(averager.any(rank == world - 1));
-  CHECK_FALSE(averager.any(false));
-  averager.barrier();
-
-  std::vector<torch::Tensor> saved;
-  for (const auto& p : net->parameters()) saved.push_back(p.grad().clone());
-  for (const auto& p : net->parameters()) saved.push_back(p.detach().clone());
-  torch::save(saved, output);
+  if (std::string(mode) == "gradients") {
+    auto net = tinyNet(100 + rank);
+    averager->broadcastParameters(net->parameters());
+    gradients(net, rank * share, share);
+    averager->averageGradients(net->parameters());
+    CHECK(averager->average(rank + 1.0) == doctest::Approx((world + 1) / 2.0));
+    CHECK(averager->any(rank == world - 1));
+    CHECK_FALSE(averager->any(false));
+    averager->barrier();
+    std::vector<torch::Tensor> saved;
+    for (const auto& p : net->parameters()) saved.push_back(p.grad().clone());
+    for (const auto& p : net->parameters()) saved.push_back(p.detach().clone());
+    torch::save(saved, output);
+  } else if (std::string(mode) == "trainer") {
+    auto model = tinyDenoiser(100 + rank);
+    Trainer trainer(model, tinyRegressionInfo(), TrainerOptions{});
+    trainer.setGradientAverager(averager);
+    const TrainBatch all = fixedTrainBatch();
+    const TrainBatch mine{
+        all.noisy.narrow(0, rank * share, share), {}, all.target.narrow(0, rank * share, share)};
+    std::vector<torch::Tensor> saved;
+    for (int i = 0; i < kTrainerSteps; ++i)
+      saved.push_back(torch::tensor({trainer.step(mine).loss}, torch::kDouble));
+    for (const auto& p : model->parameters()) saved.push_back(p.detach().clone());
+    torch::save(saved, output);
+  } else {
+    REQUIRE(std::string(mode) == "quit");
+  }
 }
 
 TEST_CASE("two processes on loopback average to the whole batch's gradients") {
@@ -150,8 +199,8 @@ TEST_CASE("two processes on loopback average to the whole batch's gradients") {
       fs::temp_directory_path() / ("dn_test_distributed_" + std::to_string(getpid()));
   fs::create_directories(dir);
   const std::string out0 = (dir / "rank0.pt").string(), out1 = (dir / "rank1.pt").string();
-  const pid_t rank1 = spawnWorker(1, 2, port, out1);  // waits for rank 0's store
-  const pid_t rank0 = spawnWorker(0, 2, port, out0);
+  const pid_t rank1 = spawnWorker(1, 2, port, "gradients", out1);  // waits for rank 0's store
+  const pid_t rank0 = spawnWorker(0, 2, port, "gradients", out0);
   REQUIRE(waitForWorker(rank0, std::chrono::seconds(60)) == 0);
   REQUIRE(waitForWorker(rank1, std::chrono::seconds(60)) == 0);
 
@@ -238,7 +287,7 @@ TEST_CASE("rank 0 alone is an error after the connect timeout") {
 
 TEST_CASE("a rank that stops makes the next collective an error, not a hang") {
   const int port = freePort();
-  const pid_t rank1 = spawnWorker(1, 2, port, "quit");
+  const pid_t rank1 = spawnWorker(1, 2, port, "quit", "-");
   GradientAverager averager(localOptions(0, 2, port));
   REQUIRE(waitForWorker(rank1, std::chrono::seconds(60)) == 0);
   auto net = tinyNet(3);
@@ -253,4 +302,42 @@ TEST_CASE("a rank that stops makes the next collective an error, not a hang") {
   CHECK(what.rfind("distributed: rank 0: gradient averaging failed, another rank has probably "
                    "stopped (",
                    0) == 0);
+}
+
+TEST_CASE("two-process Trainer steps equal one process's steps on the whole batch") {
+  const int port = freePort();
+  const fs::path dir =
+      fs::temp_directory_path() / ("dn_test_distributed_trainer_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  const std::string out0 = (dir / "rank0.pt").string(), out1 = (dir / "rank1.pt").string();
+  const pid_t rank1 = spawnWorker(1, 2, port, "trainer", out1);
+  const pid_t rank0 = spawnWorker(0, 2, port, "trainer", out0);
+  REQUIRE(waitForWorker(rank0, std::chrono::seconds(60)) == 0);
+  REQUIRE(waitForWorker(rank1, std::chrono::seconds(60)) == 0);
+
+  auto model = tinyDenoiser(100);  // rank 0's initial weights
+  Trainer single(model, tinyRegressionInfo(), TrainerOptions{});
+  std::vector<double> losses;
+  for (int i = 0; i < kTrainerSteps; ++i) losses.push_back(single.step(fixedTrainBatch()).loss);
+  const auto params = model->parameters();
+
+  std::vector<torch::Tensor> rank0Saved, rank1Saved;
+  torch::load(rank0Saved, out0);
+  torch::load(rank1Saved, out1);
+  REQUIRE(rank0Saved.size() == kTrainerSteps + params.size());
+  REQUIRE(rank1Saved.size() == rank0Saved.size());
+  for (int i = 0; i < kTrainerSteps; ++i) {
+    CHECK(rank0Saved[i].item<double>() == doctest::Approx(losses[i]).epsilon(1e-5));
+    CHECK(rank1Saved[i].item<double>() == rank0Saved[i].item<double>());
+  }
+  double largestDifference = 0;
+  for (size_t i = 0; i < params.size(); ++i) {
+    const auto& weight0 = rank0Saved[kTrainerSteps + i];
+    CHECK(torch::equal(weight0, rank1Saved[kTrainerSteps + i]));  // ranks stay identical
+    largestDifference =
+        std::max(largestDifference, (weight0 - params[i].detach()).abs().max().item<double>());
+  }
+  CAPTURE(largestDifference);
+  CHECK(largestDifference < 1e-5);
+  fs::remove_all(dir);
 }

@@ -3,11 +3,20 @@
 #include <ATen/CPUGeneratorImpl.h>
 
 #include <cmath>
+#include <stdexcept>
 
 #include "dn/sampler.h"
 
 namespace dn {
 namespace {
+
+// SplitMix64: well-mixed seeds from structured inputs (rank, step).
+uint64_t mixSeed(uint64_t value) {
+  value += 0x9E3779B97F4A7C15ull;
+  value = (value ^ (value >> 30)) * 0xBF58476D1CE4E5B9ull;
+  value = (value ^ (value >> 27)) * 0x94D049BB133111EBull;
+  return value ^ (value >> 31);
+}
 
 void checkBatch(const TrainBatch& batch) {
   TORCH_CHECK(batch.noisy.defined() && batch.target.defined(), "batch needs noisy and target");
@@ -70,14 +79,44 @@ StepStats Trainer::step(const TrainBatch& batch) {
   for (auto& group : optimizer_->param_groups())
     static_cast<torch::optim::AdamWOptions&>(group.options()).lr(lr);
   optimizer_->zero_grad();
-  auto value = loss(batch, generator_);
+  auto value = loss(batch, noiseGenerator());
   value.backward();
+  if (averager_) averager_->averageGradients(trainable_);
   if (options_.max_grad_norm > 0)
     torch::nn::utils::clip_grad_norm_(trainable_, options_.max_grad_norm);
   optimizer_->step();
   ++step_;
   updateEma();
-  return {step_, value.item<double>(), lr};
+  const double meanLoss =
+      averager_ ? averager_->average(value.item<double>()) : value.item<double>();
+  return {step_, meanLoss, lr};
+}
+
+torch::Generator& Trainer::noiseGenerator() {
+  if (!averager_ || averager_->isMain()) return generator_;
+  // Rank 0 keeps the checkpointed generator; the others derive theirs from the
+  // step, so a resumed run draws the same noise without per-rank checkpoints.
+  const uint64_t rank = static_cast<uint64_t>(averager_->rank());
+  rankGenerator_ = at::detail::createCPUGenerator(
+      mixSeed(mixSeed(mixSeed(options_.seed) ^ rank) ^ static_cast<uint64_t>(step_)));
+  return rankGenerator_;
+}
+
+void Trainer::setGradientAverager(std::shared_ptr<GradientAverager> averager) {
+  averager_ = std::move(averager);
+  if (!averager_) return;
+  auto mainStep = torch::tensor({step_}, torch::kLong);
+  averager_->broadcastParameters({mainStep});
+  const bool differs = mainStep.item<int64_t>() != step_;
+  if (averager_->any(differs))  // every rank stops, not only the odd one
+    throw std::runtime_error(
+        "rank " + std::to_string(averager_->rank()) + " is at step " + std::to_string(step_) +
+        (differs ? " but rank 0 at step " + std::to_string(mainStep.item<int64_t>())
+                 : ", another rank is not") +
+        " (resume needs the same checkpoint on every rank)");
+  // Frozen weights included, so every rank runs the same network.
+  averager_->broadcastParameters(model_->parameters());
+  averager_->broadcastParameters(ema_);
 }
 
 double Trainer::evaluate(const TrainBatch& batch, uint64_t seed) {

@@ -11,6 +11,7 @@
 
 #include <torch/torch.h>
 
+#include "dn/distributed.h"
 #include "dn/model_file.h"
 #include "dn/prior.h"
 #include "dn/schedule.h"
@@ -70,11 +71,20 @@ class Trainer {
   // A model file with the EMA weights (what inference should use).
   void saveEmaModel(const std::string& path);
 
+  // Data-parallel training: step() then averages gradients over all ranks
+  // before clipping (its loss is the mean over ranks), and ranks above 0 draw
+  // their own diffusion noise. Call on every rank after loadCheckpoint: rank 0's
+  // weights and EMA are copied to all ranks; throws std::runtime_error when the
+  // ranks are at different steps (each needs the same checkpoint to resume).
+  void setGradientAverager(std::shared_ptr<GradientAverager> averager);
+
  private:
   // The loss of info_.objective on one batch.
   torch::Tensor loss(const TrainBatch& batch, torch::Generator& generator);
   void updateEma();
   void swapEma();
+  // The generator of this step's timesteps and noise (rank-specific in data-parallel runs).
+  torch::Generator& noiseGenerator();
 
   std::shared_ptr<ConditionalDenoiser> model_;
   ModelInfo info_;
@@ -84,6 +94,8 @@ class Trainer {
   std::vector<torch::Tensor> ema_;
   std::unique_ptr<torch::optim::AdamW> optimizer_;
   torch::Generator generator_;
+  torch::Generator rankGenerator_;  // ranks above 0: reseeded from (seed, rank, step)
+  std::shared_ptr<GradientAverager> averager_;
   int64_t step_ = 0;
 };
 
