@@ -57,7 +57,7 @@ output:
   --float             float result channels (default: half)
   --inplace           allow the output to replace the input file
 resources:
-  --tile N            network tile size in pixels (default: from --maxmem)
+  --tile N            network tile size in pixels (default: from --maxmem, at most 256)
   --overlap N         tile overlap (default 32)
   --maxmem MB         memory budget for network activations (default 3000)
   --threads N         CPU threads (default: all cores)
@@ -91,7 +91,8 @@ Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
   o.model = defaultModelPath();
-  torch::set_num_threads(static_cast<int>(std::thread::hardware_concurrency()));  // LibTorch starts with 1
+  torch::set_num_threads(
+      static_cast<int>(std::thread::hardware_concurrency()));  // LibTorch starts with 1
   while (!args.done()) {
     std::string a = args.peek();
     if (args.flag("-h", "--help")) {

@@ -16,6 +16,9 @@
 
 namespace dn {
 
+// The largest tile chosen when DenoiseOptions::tile is 0 (see denoiser.cpp).
+constexpr int64_t kMaxDefaultTile = 256;
+
 struct DenoiseOptions {
   std::string respacing;  // "" = the model's default (27 steps); "10" = 10 evenly spaced steps
   int64_t skip = -1;      // noisiest steps to skip; -1 = the model's default
@@ -23,7 +26,7 @@ struct DenoiseOptions {
   double eta = 0.0;      // DDIM only
   uint64_t seed = 0;     // same seed, same output
   int samples = 1;       // K > 1: mean of K samples and their standard deviation
-  int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes
+  int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes, at most 256
   int64_t overlap = 32;  // tile overlap in pixels
   double maxMemoryBytes = 3.0e9;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
