@@ -63,6 +63,9 @@ def parse_args():
                    help="EXR compression; PXR24 is lossless for half channels, 24-bit for float ones")
     p.add_argument("--gt-count", type=int, choices=[0, 1, 2], default=2,
                    help="ground-truth renders per frame (2 for the data set)")
+    p.add_argument("--seed-tag", default="",
+                   help="mixed into every Cycles render seed (not the scene or exposure): a reference "
+                        "rendered with a tag has noise independent of the data set's renders")
     return p.parse_args(argv)
 
 
@@ -1009,15 +1012,21 @@ def write_json(path, data):
     os.replace(tmp, path)
 
 
+def render_seed(args, kind, k, index):
+    """Cycles seed of one render; an empty --seed-tag keeps the data set's original seeds."""
+    tag = (args.seed_tag,) if args.seed_tag else ()
+    return derived_seed(kind, *tag, args.seed, k, index)
+
+
 def render_frame(scene, args, k, frame_dir):
     os.makedirs(frame_dir, exist_ok=True)
     for name in os.listdir(frame_dir):  # leftovers of an interrupted run
         if ".tmp" in name:
             os.remove(os.path.join(frame_dir, name))
     times, seeds = {}, {}
-    jobs = [("spp%d_%02d.exr" % (args.spp, i), args.spp, derived_seed("stack", args.seed, k, i), "16")
+    jobs = [("spp%d_%02d.exr" % (args.spp, i), args.spp, render_seed(args, "stack", k, i), "16")
             for i in range(args.stacks)]
-    jobs += [("gt_%s.exr" % tag, args.gt_spp, derived_seed("gt", args.seed, k, tag), args.gt_depth)
+    jobs += [("gt_%s.exr" % tag, args.gt_spp, render_seed(args, "gt", k, tag), args.gt_depth)
              for tag in ("a", "b")[:args.gt_count]]
     for name, samples, seed, depth in jobs:
         seeds[name] = seed
@@ -1056,6 +1065,7 @@ def main():
             "generator_version": GENERATOR_VERSION, "blender_version": bpy.app.version_string,
             "seed": args.seed, "frame": k, "res": args.res, "spp": args.spp, "stacks": args.stacks,
             "gt_spp": args.gt_spp, "gt_count": args.gt_count, "gt_depth": args.gt_depth, "threads": args.threads,
+            "seed_tag": args.seed_tag,
             "render_seeds": seeds, "render_seconds": times, "frame_seconds": round(time.time() - t0, 3),
             "scene_build_seconds": round(build_seconds, 3),
             "camera_matrix_world": [list(map(lambda v: round(v, 6), row)) for row in cam.matrix_world],

@@ -61,6 +61,11 @@ def parse_args(argv):
     p.add_argument("--gt-spp", type=int, default=1024)
     p.add_argument("--gt-depth", choices=["16", "32"], default="16", help="EXR bits of the GT renders")
     p.add_argument("--frames", type=int, default=8)
+    p.add_argument("--gt-count", type=int, choices=[0, 1, 2], default=2,
+                   help="ground-truth renders per frame (2 for a data set, 1 for a reference)")
+    p.add_argument("--seed-tag", default="",
+                   help="mixed into every Cycles render seed: renders independent of a data set made "
+                        "without it (same scenes and exposure), e.g. for a high-spp reference")
     p.add_argument("--shard", type=parse_shard, default=(0, 1), help="i/n: render every n-th scene from the i-th")
     p.add_argument("--threads", type=int, default=2, help="Cycles threads per Blender process")
     p.add_argument("--blender", default="blender")
@@ -79,7 +84,8 @@ def parse_args(argv):
 
 def render_settings(args):
     return {"res": args.res, "spp": args.spp, "stacks": args.stacks, "gt_spp": args.gt_spp,
-            "gt_depth": args.gt_depth, "frames": args.frames}
+            "gt_depth": args.gt_depth, "frames": args.frames, "gt_count": args.gt_count,
+            "seed_tag": args.seed_tag}
 
 
 def read_json(path):
@@ -95,10 +101,12 @@ def frame_done(sdir, k, settings):
     meta = read_json(os.path.join(sdir, "frame_%d" % k, "meta.json"))
     if meta is None:
         return False
-    mismatch = [key for key in ("res", "spp", "stacks", "gt_spp", "gt_depth") if meta.get(key) != settings[key]]
+    defaults = {"gt_count": 2, "seed_tag": ""}  # frames made before these options existed
+    mismatch = [key for key in ("res", "spp", "stacks", "gt_spp", "gt_depth", "gt_count", "seed_tag")
+                if meta.get(key, defaults.get(key)) != settings[key]]
     if mismatch:
         sys.exit("make_dataset.py: %s/frame_%d was made with other settings (%s); use another --out"
-                 % (sdir, k, ", ".join("%s=%s" % (m, meta.get(m)) for m in mismatch)))
+                 % (sdir, k, ", ".join("%s=%s" % (m, meta.get(m, defaults.get(m))) for m in mismatch)))
     return all(os.path.exists(os.path.join(sdir, "frame_%d" % k, f)) for f in meta["files"])
 
 
@@ -116,7 +124,7 @@ def render_scene(args, seed, todo, log_dir):
            "--seed", str(seed), "--scene-dir", sdir, "--res", str(args.res), "--spp", str(args.spp),
            "--stacks", str(args.stacks), "--gt-spp", str(args.gt_spp), "--gt-depth", args.gt_depth,
            "--frames", str(args.frames), "--only-frames", ",".join(map(str, todo)),
-           "--threads", str(args.threads)]
+           "--threads", str(args.threads), "--gt-count", str(args.gt_count), "--seed-tag", args.seed_tag]
     log_path = os.path.join(log_dir, "scene_%06d.log" % seed)
     with open(log_path, "w") as log:
         rc = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT)
