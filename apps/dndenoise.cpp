@@ -45,6 +45,8 @@ model and sampling:
   --seed N            random seed (default 0): same seed, same output
   --samples K         mean of K samples, plus their standard deviation as an
                       'uncertainty' layer
+  --mean-match SIGMA  rescale the result so its local mean (Gaussian, SIGMA px)
+                      matches the render's, which is unbiased (default 2; 0 = off)
 input buffers:
   --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
@@ -117,6 +119,9 @@ Options parseArgs(int argc, char** argv) {
     } else if (args.flag("--samples")) {
       o.denoise.samples = args.intValue("--samples");
       if (o.denoise.samples < 1) throw cli::UsageError("--samples must be at least 1");
+    } else if (args.flag("--mean-match")) {
+      o.denoise.meanMatchSigma = args.doubleValue("--mean-match");
+      if (o.denoise.meanMatchSigma < 0) throw cli::UsageError("--mean-match must be >= 0");
     } else if (args.flag("--channels")) {
       try {
         o.read.overrides.insert(parseChannelOverride(args.value("--channels")));

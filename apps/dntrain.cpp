@@ -2,6 +2,7 @@
 //   dntrain base    --data DIR --photos DIR --out base.dnm     pretrain the prior
 //   dntrain control --data DIR --base base.dnm --out model.dnm  train the Control Module
 //   dntrain regression --data DIR --base base.dnm --out reg.dnm the single-pass ablation
+//   dntrain defaults --model M --respacing 27 --default-skip 18  tuned sampling defaults
 #include <fmt/format.h>
 #include <torch/torch.h>
 
@@ -36,6 +37,7 @@ const char* kUsage =
     R"(usage: dntrain base    --data DIR [--photos DIR ...] --out base.dnm [options]
        dntrain control --data DIR --base base.dnm --out model.dnm [options]
        dntrain regression --data DIR --base base.dnm --out reg.dnm [options]
+       dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--out FILE]
 
 base     pretrains the pixel-space prior on clean images (the data set's ground
          truths and photographs) conditioned on a degraded copy of each.
@@ -44,6 +46,9 @@ control  freezes a pretrained prior and trains the Control Module on the data
 regression  the ablation: the same networks (prior + Control Module, initialised
          from the prior, all weights trained) map the render to the clean image
          in one pass, trained with L1; dndenoise runs it in one network step.
+defaults sets the sampling a model file gives dndenoise when no --steps/--skip
+         are passed (after tuning them on a validation split); rewrites --model
+         in place unless --out is given. The weights are not touched.
 
 options:
   --data DIR            data set root (docs/dataset.md); training uses split 'train'
@@ -60,6 +65,8 @@ options:
   --prediction eps|v    network output (default eps)
   --base-channels N --res-blocks N   prior size (base only; default: the UNet defaults)
   --default-skip S      skip stored in the model for dndenoise (default: 18 control, 0 base)
+  --respacing SPEC      defaults: steps stored in the model for dndenoise ("27", "super27")
+  --model FILE          defaults: the model file to change
   --val-every N         validation every N steps (default 250; 0 disables)
   --log FILE            JSON-lines log (default: OUT.log.jsonl)
   --checkpoint FILE     checkpoint path (default: OUT.ckpt)
@@ -79,7 +86,7 @@ std::atomic<bool> stopRequested{false};
 extern "C" void onSignal(int) { stopRequested = true; }
 
 struct Options {
-  std::string mode, data, base, out, log, checkpoint;
+  std::string mode, data, base, out, log, checkpoint, model, respacing;
   std::vector<std::string> photos;
   std::string aux = "default", prediction = "eps";
   std::vector<int> spp = {4, 16, 64};
@@ -154,6 +161,10 @@ Options parseArgs(int argc, char** argv) {
       o.resBlocks = args.intValue("--res-blocks");
     else if (args.flag("--default-skip"))
       o.defaultSkip = args.intValue("--default-skip");
+    else if (args.flag("--respacing"))
+      o.respacing = args.value("--respacing");
+    else if (args.flag("--model"))
+      o.model = args.value("--model");
     else if (args.flag("--val-every"))
       o.valEvery = args.intValue("--val-every");
     else if (args.flag("--log"))
@@ -181,8 +192,16 @@ Options parseArgs(int argc, char** argv) {
     else
       throw cli::UsageError("unexpected argument '" + args.peek() + "'");
   }
+  if (o.mode == "defaults") {
+    if (o.model.empty()) throw cli::UsageError("defaults needs --model");
+    if (o.respacing.empty() && o.defaultSkip < 0)
+      throw cli::UsageError("defaults needs --respacing and/or --default-skip");
+    if (o.out.empty()) o.out = o.model;
+    return o;
+  }
   if (o.mode != "base" && o.mode != "control" && o.mode != "regression")
-    throw cli::UsageError("first argument must be base, control or regression (see --help)");
+    throw cli::UsageError(
+        "first argument must be base, control, regression or defaults (see --help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
   if (o.mode != "base" && (o.base.empty() || o.data.empty()))
     throw cli::UsageError(o.mode + " needs --base and --data");
@@ -324,7 +343,26 @@ std::string validate(Trainer& trainer, const TrainBatch& val, tonemap::Curve cur
       psnr(input, ref));
 }
 
+// dntrain defaults: the model's sampling defaults, validated against its schedule.
+int setDefaults(const Options& o) {
+  LoadedModel loaded = loadModelFile(o.model);
+  ModelInfo& info = loaded.info;
+  if (!o.respacing.empty()) info.respacing = o.respacing;
+  if (o.defaultSkip >= 0) info.notes["default_skip"] = std::to_string(o.defaultSkip);
+  auto& skip = info.notes["default_skip"];
+  if (skip.empty()) skip = "0";
+  try {
+    startStep(info.samplingSchedule(), std::stoll(skip));
+  } catch (const std::exception& e) {
+    throw cli::UsageError(std::string("bad sampling defaults: ") + e.what());
+  }
+  saveModelFile(o.out, info, *loaded.model);
+  fmt::print(stderr, "dntrain: {}: respacing {}, skip {}\n", o.out, info.respacing, skip);
+  return cli::kExitOk;
+}
+
 int run(const Options& o) {
+  if (o.mode == "defaults") return setDefaults(o);
   // Debian's LibTorch starts with one thread: use every core unless told otherwise.
   torch::set_num_threads(o.threads > 0 ? o.threads
                                        : static_cast<int>(std::thread::hardware_concurrency()));

@@ -106,6 +106,8 @@ def method_table(var):
          "sweep": sweep_settings(var.get("BASE_SWEEP", ""))},
         {"name": "ours", "label": "Ours (model's default steps/skip)", "runner": "dndenoise",
          "family": "OURS", "args": dn},
+        {"name": "ours_nomatch", "label": "Ours without local mean matching (`--mean-match 0`)",
+         "runner": "dndenoise", "family": "OURS", "args": dn + ["--mean-match", "0"]},
         {"name": "ours_best", "label": "Ours (best steps/skip)", "runner": "dndenoise",
          "family": "OURS", "args": dn, "sweep": sweep_settings(var.get("OURS_SWEEP", ""))},
         {"name": "ours_samples", "label": f"Ours (mean of {samples} samples)", "runner": "dndenoise",

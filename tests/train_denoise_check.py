@@ -124,6 +124,24 @@ def main():
     check("--samples 2 adds an uncertainty layer", out.returncode == 0 and "ViewLayer.uncertainty.Y" in chans
           and chans["ViewLayer.uncertainty.Y"].max() > 0, sorted(chans))
 
+    out = run(base_cmd + ["--mean-match", "0", frame, "-o", p("nomatch.exr")])
+    unmatched = read_rgb(p("nomatch.exr"), "ViewLayer.Denoised")
+    render_mean = np.clip(np.nan_to_num(read_rgb(frame, "ViewLayer.Combined")), 0, 6).mean(axis=(0, 1))
+    check("local mean matching moves the result's channel means towards the render's",
+          out.returncode == 0 and np.abs(denoised.mean(axis=(0, 1)) - render_mean).sum()
+          < np.abs(unmatched.mean(axis=(0, 1)) - render_mean).sum(),
+          (denoised.mean(axis=(0, 1)), unmatched.mean(axis=(0, 1)), render_mean))
+
+    out = run([dntrain, "defaults", "--model", model, "--respacing", "6", "--default-skip", "2",
+               "--out", p("tuned.dnm")])
+    check("dntrain defaults: exit 0", out.returncode == 0, out.stderr)
+    run([dndenoise, "--model", p("tuned.dnm"), "--threads", "1", frame, "-o", p("tuned.exr")])
+    check("a model with tuned defaults denoises with no flags as with --steps 6 --skip 2",
+          np.array_equal(read_rgb(p("tuned.exr"), "ViewLayer.Denoised"), denoised))
+    expect_error("dntrain defaults: skip beyond the steps",
+                 [dntrain, "defaults", "--model", model, "--respacing", "6", "--default-skip", "6",
+                  "--out", p("x0.dnm")], "skip_steps", p("x0.dnm"))
+
     out = run(base_cmd + ["--rgb-only", frame, "-o", p("rgb.exr")])
     check("--rgb-only writes R,G,B only", out.returncode == 0 and set(channels_of(p("rgb.exr"))) == {"R", "G", "B"})
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "dn/mean_match.h"
 #include "dn/model_inputs.h"
 #include "dn/tiler.h"
 
@@ -134,7 +135,8 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   DenoiseResult result;
   const double n = samples;
   torch::Tensor mean = sum / n;
-  result.color = tensorToImage(mean);
+  result.color = tensorToImage(
+      matchLocalMean(mean, imageToTensor(frame.get("color")), options.meanMatchSigma));
   if (samples > 1) {
     torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
     result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));

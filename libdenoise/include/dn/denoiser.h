@@ -23,11 +23,12 @@ struct DenoiseOptions {
   std::string respacing;  // "" = the model's default (27 steps); "10" = 10 evenly spaced steps
   int64_t skip = -1;      // noisiest steps to skip; -1 = the model's default
   SamplerKind sampler = SamplerKind::Ddpm;
-  double eta = 0.0;      // DDIM only
-  uint64_t seed = 0;     // same seed, same output
-  int samples = 1;       // K > 1: mean of K samples and their standard deviation
-  int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes, at most 256
-  int64_t overlap = 32;  // tile overlap in pixels
+  double eta = 0.0;             // DDIM only
+  uint64_t seed = 0;            // same seed, same output
+  int samples = 1;              // K > 1: mean of K samples and their standard deviation
+  double meanMatchSigma = 2.0;  // local mean matching radius (dn/mean_match.h); 0 = off
+  int64_t tile = 0;             // network tile size; 0 = derived from maxMemoryBytes, at most 256
+  int64_t overlap = 32;         // tile overlap in pixels
   double maxMemoryBytes = 3.0e9;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };

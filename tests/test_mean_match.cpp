@@ -1,0 +1,72 @@
+// Local mean matching (dn/mean_match.h): the Gaussian blur against closed-form
+// values, and the correction against a known reference.
+#include <cmath>
+#include <limits>
+
+#include "doctest_torch.h"
+
+#include "dn/mean_match.h"
+
+using namespace dn;
+
+namespace {
+
+// A smooth positive HDR image (1,3,h,w): a gradient with a different slope per channel.
+torch::Tensor smoothReference(int64_t h, int64_t w) {
+  auto y = torch::linspace(0.2, 1.5, h).view({1, 1, h, 1});
+  auto x = torch::linspace(0.5, 1.0, w).view({1, 1, 1, w});
+  return torch::cat({y * x, 0.5 * y + 0.2 * x, 0.3 + 0.0 * y * x}, 1);
+}
+
+// Zero-mean Monte Carlo-like noise at the highest frequency: +a, -a in a checkerboard.
+torch::Tensor checkerboard(int64_t h, int64_t w, double amplitude) {
+  auto parity = (torch::arange(h).view({h, 1}) + torch::arange(w).view({1, w})).remainder(2);
+  return (amplitude * (2.0 * parity - 1.0)).to(torch::kFloat32).view({1, 1, h, w});
+}
+
+}  // namespace
+
+TEST_CASE("gaussianBlur keeps constants and spreads an impulse like the continuous Gaussian") {
+  auto constant = torch::full({1, 2, 9, 11}, 0.75f);
+  CHECK(torch::allclose(gaussianBlur(constant, 2.0), constant, 1e-6, 1e-6));
+
+  auto impulse = torch::zeros({1, 1, 41, 41});
+  impulse[0][0][20][20] = 1.0f;
+  const double sigma = 2.0;
+  auto blurred = gaussianBlur(impulse, sigma);
+  CHECK(blurred.sum().item<double>() == doctest::Approx(1.0).epsilon(1e-5));
+  const double pi = std::acos(-1.0);
+  CHECK(blurred[0][0][20][20].item<double>() ==
+        doctest::Approx(1.0 / (2 * pi * sigma * sigma)).epsilon(0.01));
+  CHECK(blurred[0][0][20][24].item<double>() ==
+        doctest::Approx(std::exp(-0.5 * 4.0) / (2 * pi * sigma * sigma)).epsilon(0.01));
+  CHECK(torch::equal(gaussianBlur(impulse, 0.0), impulse));
+}
+
+TEST_CASE("matchLocalMean removes a brightness and colour bias but keeps the noise-free detail") {
+  const auto reference = smoothReference(32, 40);
+  const auto render = reference + checkerboard(32, 40, 0.1);  // unbiased, noisy
+  auto biased = reference * torch::tensor({0.7f, 0.9f, 1.2f}).view({1, 3, 1, 1});
+  auto corrected = matchLocalMean(biased, render, 2.0);
+  // Replicated edges break the checkerboard's zero mean within 3 sigma of the border.
+  auto interior = [](const torch::Tensor& t) { return t.narrow(2, 6, 20).narrow(3, 6, 28); };
+  const double before = interior(biased - reference).abs().max().item<double>();
+  const double after = interior(corrected - reference).abs().max().item<double>();
+  CHECK(before > 0.1);
+  CHECK(after < 1e-3);
+  CHECK((corrected - reference).abs().mean().item<double>() <
+        0.2 * (biased - reference).abs().mean().item<double>());
+  // Off: the image is returned as it is.
+  CHECK(torch::equal(matchLocalMean(biased, render, 0.0), biased));
+}
+
+TEST_CASE("matchLocalMean bounds the correction and survives non-finite renders") {
+  auto denoised = torch::full({1, 3, 8, 8}, 0.1f);
+  auto render = torch::full({1, 3, 8, 8}, 5.0f);
+  CHECK(matchLocalMean(denoised, render, 2.0).max().item<double>() ==
+        doctest::Approx(0.4).epsilon(1e-5));  // ratio 50 clamped to 4
+
+  render[0][0][3][3] = std::numeric_limits<float>::quiet_NaN();
+  render[0][1][4][4] = std::numeric_limits<float>::infinity();
+  CHECK(torch::isfinite(matchLocalMean(denoised, render, 2.0)).all().item<bool>());
+}
