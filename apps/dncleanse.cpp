@@ -52,6 +52,7 @@ train options:
   --widths LIST          UNet widths per level (default 24,32,48)
   --dilations LIST       one kernel iteration per dilation (default 1,2,4)
   --feature-dims N       affinity features per iteration (default 8)
+  --demodulate on|off    filter radiance / albedo, then multiply back (default on)
   --val-every N          validation SMAPE every N steps (default 0: never)
   --val-samples N        validation crops (default 32)
   --train-split NAME     (default train)    --val-split NAME  (default val)
@@ -80,6 +81,12 @@ std::vector<int64_t> toInt64s(const std::string& option, const std::string& text
   for (const auto& item : cli::splitList(text)) out.push_back(cli::Args::toInt(option, item));
   if (out.empty()) throw cli::UsageError(option + " needs a list");
   return out;
+}
+
+bool onOff(const std::string& option, const std::string& value) {
+  if (value == "on") return true;
+  if (value == "off") return false;
+  throw cli::UsageError(option + " wants on or off, got '" + value + "'");
 }
 
 std::string joined(const std::vector<std::string>& items) {
@@ -149,6 +156,7 @@ const std::map<std::string, std::string> kSettingOption = {{"data", "--data"},
 TrainOptions parseTrain(cli::Args& args) {
   TrainOptions o;
   o.net.input_buffers = defaultAuxBuffers();
+  o.net.demodulate = true;
   while (!args.done()) {
     const std::string arg = args.peek();
     auto take = [&](const char* name) {
@@ -202,6 +210,8 @@ TrainOptions parseTrain(cli::Args& args) {
       o.net.dilations = toInt64s("--dilations", args.value("--dilations"));
     else if (take("--feature-dims"))
       o.net.feature_dims = args.intValue("--feature-dims");
+    else if (take("--demodulate"))
+      o.net.demodulate = onOff("--demodulate", args.value("--demodulate"));
     else
       throw cli::UsageError("train: unknown argument '" + arg + "'");
   }
@@ -254,7 +264,8 @@ KernelModelInfo adoptCheckpoint(TrainOptions& o) {
   o.task = s.at("task");
   o.spp = s.at("spp");
   o.train_split = s.at("train_split");
-  for (const char* option : {"--buffers", "--widths", "--dilations", "--feature-dims"})
+  for (const char* option :
+       {"--buffers", "--widths", "--dilations", "--feature-dims", "--demodulate"})
     if (o.given.count(option))
       throw cli::UsageError(std::string(option) + " cannot change when resuming");
   return header.info;
@@ -348,6 +359,13 @@ int runTrain(cli::Args& args) {
                       loader_options, position);
   std::vector<Tensors> validation;
   if (o.val_every > 0) validation = validationSet(o, info.net);
+  // The loss of passing the input through unchanged: a cleanser that does not
+  // beat it has learned nothing (see docs/dncleanse.md).
+  const auto identityLoss = [](const Tensors& t) {
+    return kernelNetLoss(t.radiance, t.target, 1e-2).item<double>();
+  };
+  double identity_val = 0;
+  for (const auto& v : validation) identity_val += identityLoss(v) / double(validation.size());
   JsonLog log(o.log);
   if (trainer.stepCount() == 0)
     log.write(fmt::format(
@@ -361,7 +379,7 @@ int runTrain(cli::Args& args) {
   const auto start = Clock::now();
   auto last_checkpoint = start, last_progress = start;
   const bool tty = ::isatty(STDERR_FILENO);
-  double window_loss = 0, last_val = -1;
+  double window_loss = 0, window_identity = 0, last_val = -1;
   int window_steps = 0;
   const int64_t first_step = trainer.stepCount();
   auto elapsed = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
@@ -383,26 +401,30 @@ int runTrain(cli::Args& args) {
     auto batch = loader.next();
     const auto t = toTensors(batch);
     window_loss += trainer.step(t.radiance, t.aux, t.target);
+    window_identity += identityLoss(t);
     ++window_steps;
     const int64_t step = trainer.stepCount();
     const double rate = double(step - first_step) * o.batch / std::max(elapsed(), 1e-9);
     if (window_steps == 10 || step == o.steps) {
       log.write(fmt::format(
-          R"({{"event":"train","step":{},"loss":{:.6f},"lr":{:g},"samples_per_s":{:.2f},"seconds":{:.1f}}})",
-          step, window_loss / window_steps, trainer.currentLearningRate(), rate,
-          seconds_before + elapsed()));
+          R"({{"event":"train","step":{},"loss":{:.6f},"identity_loss":{:.6f},"lr":{:g},"samples_per_s":{:.2f},"seconds":{:.1f}}})",
+          step, window_loss / window_steps, window_identity / window_steps,
+          trainer.currentLearningRate(), rate, seconds_before + elapsed()));
     }
     if (o.val_every > 0 && (step % o.val_every == 0 || step == o.steps)) {
       double sum = 0;
       for (const auto& v : validation) sum += trainer.evaluate(v.radiance, v.aux, v.target);
       last_val = sum / validation.size();
-      log.write(
-          fmt::format(R"({{"event":"validation","step":{},"smape":{:.6f}}})", step, last_val));
+      log.write(fmt::format(
+          R"({{"event":"validation","step":{},"smape":{:.6f},"identity_smape":{:.6f}}})", step,
+          last_val, identity_val));
     }
     const auto now = Clock::now();
     if (tty || now - last_progress > std::chrono::seconds(30) || step == o.steps) {
       const double eta = (o.steps - step) * o.batch / std::max(rate, 1e-9);
-      const std::string val = last_val >= 0 ? fmt::format("  val {:.4f}", last_val) : "";
+      const std::string val =
+          last_val >= 0 ? fmt::format("  val {:.4f} (identity {:.4f})", last_val, identity_val)
+                        : "";
       std::fprintf(
           stderr, "%s",
           fmt::format("{}step {}/{}  loss {:.4f}{}  {:.1f} samples/s  elapsed {}  eta {}{}",
@@ -411,7 +433,7 @@ int runTrain(cli::Args& args) {
               .c_str());
       last_progress = now;
     }
-    if (window_steps == 10) window_loss = 0, window_steps = 0;
+    if (window_steps == 10) window_loss = 0, window_identity = 0, window_steps = 0;
     if (now - last_checkpoint > std::chrono::duration<double>(o.checkpoint_minutes * 60)) save();
   }
   save();

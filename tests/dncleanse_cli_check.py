@@ -85,6 +85,9 @@ def main():
     check("train: log has start, train, validation, checkpoint, done",
           all(k in kinds for k in ("start", "train", "validation", "checkpoint", "done")), str(kinds))
     check("train: log losses finite", all(np.isfinite(e["loss"]) for e in events if e["event"] == "train"))
+    check("train: log the identity's loss beside the model's",
+          all(np.isfinite(e["identity_loss"]) for e in events if e["event"] == "train")
+          and all(e["identity_smape"] > 0 for e in events if e["event"] == "validation"))
     check("train: progress line on stderr", "step 12/12" in out.stderr, out.stderr)
 
     # --- the same run in two parts: --steps 5, then --resume to 12
@@ -199,6 +202,10 @@ def main():
                  p("isik.pt"))
     expect_error("unknown buffer", [tool, "train", "--data", data, "--out", p("y.pt"), "--buffers", "nope"],
                  "nope", p("y.pt"))
+    expect_error("demodulation without albedo",
+                 [tool, "train", "--data", data, "--out", p("y.pt"), "--buffers", "normal"], "albedo", p("y.pt"))
+    expect_error("bad --demodulate", [tool, "train", "--data", data, "--out", p("y.pt"), "--demodulate", "yes"],
+                 "--demodulate", p("y.pt"))
     expect_error("unknown option", [tool, src, "-o", p("x7.exr"), "--model", p("full.pt"), "--bogus"],
                  "--bogus", p("x7.exr"))
 

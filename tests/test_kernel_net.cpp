@@ -91,10 +91,15 @@ torch::Tensor flatNormals(int64_t batch, int64_t size) {
 TEST_CASE("SMAPE matches closed-form values") {
   auto a = torch::tensor({1.0f, 2.0f, 0.0f, 0.0f}).view({2, 2});
   auto b = torch::tensor({3.0f, 0.0f, 0.0f, 4.0f}).view({2, 2});
-  // Sample 1: mean|a-b| = 2, mean|a| = 1.5, mean|b| = 1.5. Sample 2: 2 / (0 + 2).
-  CHECK(smapeLoss(a, b, 0.0).item<double>() == doctest::Approx((2.0 / 3.0 + 1.0) / 2));
+  // Per element |a-b| / (|a|+|b|+eps): 2/4, 2/2, 0/0 (0 with eps), 4/4; mean over all.
   CHECK(smapeLoss(a, b, 0.01).item<double>() ==
-        doctest::Approx((2.0 / 3.01 + 2.0 / 2.01) / 2).epsilon(1e-6));
+        doctest::Approx((2.0 / 4.01 + 2.0 / 2.01 + 0.0 + 4.0 / 4.01) / 4).epsilon(1e-6));
+  // Relative per element: the same 10% error costs the same in a dark and a
+  // bright pixel (an image-level ratio would let the bright one dominate).
+  auto truth = torch::tensor({0.01f, 100.0f}), dark_off = torch::tensor({0.011f, 100.0f});
+  auto bright_off = torch::tensor({0.01f, 110.0f});
+  CHECK(smapeLoss(dark_off, truth, 0.0).item<double>() ==
+        doctest::Approx(smapeLoss(bright_off, truth, 0.0).item<double>()).epsilon(1e-5));
   CHECK(smapeLoss(b, a, 0.01).item<double>() ==
         doctest::Approx(smapeLoss(a, b, 0.01).item<double>()));
   CHECK(smapeLoss(a, a, 0.01).item<double>() == 0.0);
@@ -139,6 +144,27 @@ TEST_CASE("identical features give a box filter, masked at the border") {
       affinityFilter(image, split, torch::ones({1, 1, 11, 9}), torch::ones({1, 1, 11, 9}), 3, 1);
   auto left = naiveBox(image.narrow(3, 0, 4).contiguous(), 3, 1, 1.0);
   CHECK(torch::allclose(out.narrow(3, 0, 4), left, 1e-5, 1e-6));
+}
+
+TEST_CASE("demodulation filters radiance / albedo and keeps texture") {
+  torch::manual_seed(15);
+  auto config = tinyConfig();
+  config.demodulate = true;
+  KernelNet net(config);
+  torch::NoGradGuard no_grad;
+  auto aux = torch::rand({1, 6, 14, 10});
+  const auto modulation = aux.narrow(1, 0, 3) + kDemodulationEps;
+  // Flat shading times any texture comes out unchanged, whatever the kernels.
+  auto textured = 1.7 * modulation;
+  CHECK(torch::allclose(net->forward(textured, aux), textured, 1e-4, 1e-5));
+  // With a zero head: box filters of the shading, multiplied back by the albedo.
+  net->head->weight.zero_();
+  auto radiance = torch::rand({1, 3, 14, 10}) * 4;
+  auto shading = (radiance / modulation).contiguous();
+  auto expected = naiveBox(naiveBox(shading, 5, 1, 1.0), 5, 2, 1.0) * modulation;
+  CHECK(torch::allclose(net->forward(radiance, aux), expected, 1e-4, 1e-5));
+  config.input_buffers = {"normal"};
+  CHECK_THROWS_AS(config.validate(), std::invalid_argument);
 }
 
 TEST_CASE("the network with a zero head filters like iterated box filters") {
@@ -268,6 +294,7 @@ TEST_CASE("model files round-trip; damaged files fail naming the file") {
   torch::manual_seed(8);
   KernelModelInfo info;
   info.net = tinyConfig();
+  info.net.demodulate = true;
   info.task = KernelTask::Denoise;
   info.notes["data"] = "/some/data set";
   KernelNet net(info.net);
@@ -276,6 +303,11 @@ TEST_CASE("model files round-trip; damaged files fail naming the file") {
   auto loaded = loadKernelModel(path);
   CHECK(kernelModelInfoToText(loaded.info) == kernelModelInfoToText(info));
   CHECK(loaded.info.task == KernelTask::Denoise);
+  CHECK(loaded.info.net.demodulate);
+  // Model files from before demodulation existed lack the key: no demodulation.
+  auto legacy = kernelModelInfoToText(info);
+  legacy.erase(legacy.find("kernel.demodulate=1\n"), std::string("kernel.demodulate=1\n").size());
+  CHECK_FALSE(kernelModelInfoFromText(legacy, "legacy").net.demodulate);
   CHECK(loaded.info.notes.at("data") == "/some/data set");
   auto radiance = torch::rand({1, 3, 12, 12}), aux = torch::rand({1, 6, 12, 12});
   torch::NoGradGuard no_grad;
@@ -313,6 +345,10 @@ TEST_CASE("model files round-trip; damaged files fail naming the file") {
   expectError(dir.file("other.dnk"), "expected a kernel-model");
   writeArchiveFile(dir.file("badmeta.dnk"), "kernel-model", "task=denoise\n", empty);
   expectError(dir.file("badmeta.dnk"), "lacks");
+  auto bad_flag = kernelModelInfoToText(info);
+  bad_flag.replace(bad_flag.find("kernel.demodulate=1"), 19, "kernel.demodulate=7");
+  writeArchiveFile(dir.file("badflag.dnk"), "kernel-model", bad_flag, empty);
+  expectError(dir.file("badflag.dnk"), "demodulate");
   // Metadata naming a different architecture than the stored weights.
   auto wider = info;
   wider.net.widths = {8, 16};
@@ -379,6 +415,6 @@ TEST_CASE("Noise2Noise training on noisy stripes lowers the error against the cl
   const double after = errorAgainstClean();
   MESSAGE("SMAPE vs clean: noisy " << noisy_error << ", at init " << before << ", trained "
                                    << after);
-  CHECK(before < noisy_error);  // even the initial kernels average noise away
+  CHECK(before < noisy_error);   // even the initial kernels average noise away
   CHECK(after < 0.85 * before);  // learning to stop at the albedo edges does better
 }

@@ -151,10 +151,18 @@ void KernelNetConfig::validate() const {
   if (kernel_size < 3 || kernel_size > 15 || kernel_size % 2 == 0)
     throw std::invalid_argument("kernel size must be odd, 3 to 15");
   auxChannels();
+  if (demodulate) albedoOffset();
   tonemap::curveFromName(tonemap);
 }
 
 int64_t KernelNetConfig::auxChannels() const { return auxChannelCount(input_buffers); }
+
+int64_t KernelNetConfig::albedoOffset() const {
+  const auto albedo = std::find(input_buffers.begin(), input_buffers.end(), "albedo");
+  if (albedo == input_buffers.end())
+    throw std::invalid_argument("kernel net demodulation needs the albedo buffer");
+  return auxChannelCount({input_buffers.begin(), albedo});
+}
 
 torch::Tensor affinityFilter(const torch::Tensor& image, const torch::Tensor& features,
                              const torch::Tensor& bandwidth, const torch::Tensor& centre,
@@ -270,10 +278,16 @@ std::vector<KernelGuide> KernelNetImpl::decodeGuides(const torch::Tensor& maps) 
 torch::Tensor KernelNetImpl::forward(const torch::Tensor& radiance, const torch::Tensor& aux) {
   const auto guides = decodeGuides(guideMaps(radiance, aux));
   torch::Tensor x = torch::nan_to_num(radiance, 0.0, 0.0, 0.0).clamp_min(0.0);
+  torch::Tensor modulation;
+  if (config_.demodulate) {
+    const auto albedo = aux.narrow(1, config_.albedoOffset(), 3);
+    modulation = torch::nan_to_num(albedo, 0.0, 0.0, 0.0).clamp(0.0, 1.0) + kDemodulationEps;
+    x = x / modulation;
+  }
   for (size_t i = 0; i < guides.size(); ++i)
     x = affinityFilter(x, guides[i].features, guides[i].bandwidth, guides[i].centre,
                        config_.kernel_size, config_.dilations[i]);
-  return x;
+  return config_.demodulate ? x * modulation : x;
 }
 
 const char* kernelTaskName(KernelTask task) {
@@ -295,7 +309,8 @@ std::string kernelModelInfoToText(const KernelModelInfo& info) {
       << "kernel.widths=" << joinInts(net.widths) << "\n"
       << "kernel.feature_dims=" << net.feature_dims << "\n"
       << "kernel.dilations=" << joinInts(net.dilations) << "\n"
-      << "kernel.kernel_size=" << net.kernel_size << "\n";
+      << "kernel.kernel_size=" << net.kernel_size << "\n"
+      << "kernel.demodulate=" << (net.demodulate ? 1 : 0) << "\n";
   for (const auto& [key, value] : info.notes) {
     if (value.find('\n') != std::string::npos || key.find('=') != std::string::npos ||
         key.find('\n') != std::string::npos)
@@ -315,6 +330,13 @@ KernelModelInfo kernelModelInfoFromText(const std::string& text, const std::stri
   net.feature_dims = metadata.integer("kernel.feature_dims");
   net.dilations = metadata.integers("kernel.dilations");
   net.kernel_size = metadata.integer("kernel.kernel_size");
+  // Models written before demodulation existed filter the radiance itself.
+  if (metadata.values.count("kernel.demodulate")) {
+    const int64_t demodulate = metadata.integer("kernel.demodulate");
+    if (demodulate != 0 && demodulate != 1)
+      metadata.fail("metadata 'kernel.demodulate' is not 0 or 1");
+    net.demodulate = demodulate == 1;
+  }
   try {
     info.task = kernelTaskFromName(metadata.text("task"));
     net.validate();

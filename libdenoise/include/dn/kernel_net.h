@@ -28,6 +28,9 @@
 
 namespace dn {
 
+// Keeps demodulation finite where the albedo is 0 (black surfaces, emitters, sky).
+constexpr double kDemodulationEps = 0.02;
+
 struct KernelNetConfig {
   std::vector<std::string> input_buffers;      // canonical aux buffer names, in order
   std::string tonemap = "log";                 // radiance curve for the feature network inputs
@@ -35,9 +38,15 @@ struct KernelNetConfig {
   int64_t feature_dims = 8;                    // affinity features per iteration
   std::vector<int64_t> dilations = {1, 2, 4};  // one filtering iteration per entry
   int64_t kernel_size = 5;
+  // Filter radiance / (albedo + kDemodulationEps) and multiply the result by the
+  // same factor: texture lives in the albedo, so kernels that reach across it
+  // average the (smooth, noisy) shading instead of blurring the texture.
+  // Needs "albedo" among input_buffers.
+  bool demodulate = false;
 
   void validate() const;  // throws std::invalid_argument
   int64_t auxChannels() const;
+  int64_t albedoOffset() const;  // first aux channel of "albedo"; throws if absent
   // Per iteration: feature_dims features, one bandwidth, one centre weight.
   int64_t guideChannels() const { return int64_t(dilations.size()) * (feature_dims + 2); }
 };
