@@ -1,5 +1,8 @@
 #include "doctest_torch.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "dn/model_inputs.h"
 #include "dn/tiler.h"
 
@@ -13,6 +16,37 @@ torch::Tensor localOperator(const std::vector<torch::Tensor>& in) {
   auto w1 = torch::randn({4, 3, 3, 3}), w2 = torch::randn({2, 4, 3, 3});
   auto h = torch::conv2d(in[0], w1, {}, 1, 1).tanh();
   return torch::conv2d(h, w2, {}, 1, 1) + in[1].narrow(1, 0, 1);
+}
+
+// A frame with the default aux buffers: wide-ranged random values, some NaN/Inf.
+FrameBuffers randomFrame(int width, int height) {
+  torch::manual_seed(7);
+  FrameBuffers frame;
+  frame.width = width;
+  frame.height = height;
+  for (const auto& name : defaultAuxBuffers()) {
+    Image image(width, height, findBufferSpec(name)->channels);
+    auto values = torch::randn({static_cast<int64_t>(image.size())}) * 50.0;
+    std::copy_n(values.data_ptr<float>(), image.size(), image.pixels.begin());
+    image.pixels[3] = NAN;
+    image.pixels[image.size() / 2] = INFINITY;
+    frame.buffers[name] = image;
+  }
+  return frame;
+}
+
+// The frame's aux buffers as one (1,C,H,W) tensor, element by element.
+torch::Tensor auxByLoops(const FrameBuffers& frame) {
+  auto out = torch::empty({1, auxChannelCount(defaultAuxBuffers()), frame.height, frame.width});
+  auto a = out.accessor<float, 4>();
+  int64_t channel = 0;
+  for (const auto& name : defaultAuxBuffers()) {
+    const Image& image = frame.get(name);
+    for (int c = 0; c < image.channels; ++c, ++channel)
+      for (int y = 0; y < image.height; ++y)
+        for (int x = 0; x < image.width; ++x) a[0][channel][y][x] = image.at(x, y, c);
+  }
+  return out;
 }
 
 }  // namespace
@@ -74,6 +108,54 @@ TEST_CASE("aux normalization keeps every buffer in a bounded range") {
   CHECK(n.sizes() == aux.sizes());
   CHECK(n.min().item<float>() >= -1.0f);
   CHECK(n.max().item<float>() <= 1.0f);
-  CHECK_THROWS_AS(normalizeAux(aux.narrow(1, 0, 5), buffers, tonemap::Curve::Log), std::invalid_argument);
+  CHECK_THROWS_AS(normalizeAux(aux.narrow(1, 0, 5), buffers, tonemap::Curve::Log),
+                  std::invalid_argument);
   CHECK_THROWS_AS(auxChannelCount({"color"}), std::invalid_argument);
+}
+
+TEST_CASE("aux normalized per region equals the whole frame's normalized aux, cropped") {
+  const FrameBuffers frame = randomFrame(13, 11);
+  const auto curve = tonemap::Curve::Log;
+  const auto whole = normalizeAux(auxByLoops(frame), defaultAuxBuffers(), curve);
+  for (const TileRect r : {TileRect{0, 0, 11, 13}, TileRect{2, 5, 6, 4}, TileRect{10, 12, 1, 1}}) {
+    auto region =
+        normalizedAuxRegion(frame, defaultAuxBuffers(), curve, r.y0, r.x0, r.height, r.width);
+    CAPTURE(r.y0);
+    CAPTURE(r.x0);
+    REQUIRE(region.sizes() == crop(whole, r).sizes());
+    CHECK(torch::equal(region, crop(whole, r)));
+  }
+  FrameBuffers lacking = frame;
+  lacking.buffers.erase("depth");
+  CHECK_THROWS_AS(normalizedAuxRegion(lacking, defaultAuxBuffers(), curve, 0, 0, 2, 2),
+                  std::out_of_range);
+}
+
+TEST_CASE("image regions are copies, one channel included") {
+  Image image(5, 4, 1);
+  for (std::size_t i = 0; i < image.size(); ++i) image.pixels[i] = static_cast<float>(i);
+  auto region = imageRegionToTensor(image, 1, 2, 3, 2);
+  CHECK(region.sizes() == torch::IntArrayRef({1, 1, 3, 2}));
+  CHECK(region[0][0][0][0].item<float>() == image.at(2, 1, 0));
+  CHECK(region[0][0][2][1].item<float>() == image.at(3, 3, 0));
+  region.fill_(-1.0f);
+  CHECK(image.at(2, 1, 0) == 7.0f);
+}
+
+TEST_CASE("tiles built from their rectangles equal the untiled output") {
+  const FrameBuffers frame = randomFrame(47, 61);
+  const auto curve = tonemap::Curve::Log;
+  torch::manual_seed(1);
+  auto x = torch::randn({1, 3, 61, 47});
+  auto full = localOperator({x, normalizeAux(auxByLoops(frame), defaultAuxBuffers(), curve)});
+  for (int64_t tile : {16, 40, 64}) {
+    Tiler tiler(61, 47, tile, 8);  // margin 2 = the operator's radius
+    auto tiled = tiler.apply([&](const TileRect& r) {
+      return localOperator({crop(x, r), normalizedAuxRegion(frame, defaultAuxBuffers(), curve, r.y0,
+                                                            r.x0, r.height, r.width)});
+    });
+    CAPTURE(tile);
+    REQUIRE(tiled.sizes() == full.sizes());
+    CHECK((tiled - full).abs().max().item<float>() < 1e-5);
+  }
 }

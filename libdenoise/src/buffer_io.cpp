@@ -241,28 +241,49 @@ std::pair<std::string, std::vector<std::string>> parseChannelOverride(const std:
   return {buffer, channels};
 }
 
-FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
-  auto in = openInput(path);
-  ChannelTable table = scanChannels(*in, path);
+namespace {
+
+// Every canonical buffer the file holds (in canonical order) with its channels:
+// the overrides, else the names found in the chosen view layer.
+std::vector<std::pair<std::string, std::vector<std::string>>> locateBuffers(
+    const ChannelTable& table, const std::string& path, const ReadOptions& options) {
   if (!options.viewLayer.empty() && std::find(table.viewLayers.begin(), table.viewLayers.end(),
                                               options.viewLayer) == table.viewLayers.end())
     fail(path,
          "has no view layer '" + options.viewLayer + "' (has: " + joined(table.viewLayers) + ")");
-
-  FrameBuffers frame;
-  frame.width = table.specs[0].width;
-  frame.height = table.specs[0].height;
+  std::vector<std::pair<std::string, std::vector<std::string>>> located;
   for (const auto& spec : canonicalBuffers()) {
-    bool wanted = options.only.empty() || std::find(options.only.begin(), options.only.end(),
-                                                    spec.name) != options.only.end();
-    if (!wanted) continue;
     auto override = options.overrides.find(spec.name);
     std::vector<std::string> names = override != options.overrides.end()
                                          ? override->second
                                          : resolveChannels(table, spec, options.viewLayer);
-    if (names.empty()) continue;
-    frame.buffers[spec.name] = readChannels(*in, table, path, names);
-    frame.sourceChannels[spec.name] = names;
+    if (!names.empty()) located.emplace_back(spec.name, std::move(names));
+  }
+  return located;
+}
+
+}  // namespace
+
+std::vector<std::string> availableBuffers(const std::string& path, const ReadOptions& options) {
+  auto in = openInput(path);
+  std::vector<std::string> names;
+  for (const auto& [name, channels] : locateBuffers(scanChannels(*in, path), path, options))
+    names.push_back(name);
+  return names;
+}
+
+FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
+  auto in = openInput(path);
+  ChannelTable table = scanChannels(*in, path);
+  FrameBuffers frame;
+  frame.width = table.specs[0].width;
+  frame.height = table.specs[0].height;
+  for (const auto& [name, channels] : locateBuffers(table, path, options)) {
+    bool wanted = options.only.empty() ||
+                  std::find(options.only.begin(), options.only.end(), name) != options.only.end();
+    if (!wanted) continue;
+    frame.buffers[name] = readChannels(*in, table, path, channels);
+    frame.sourceChannels[name] = channels;
   }
   if (!frame.has("color")) {
     std::vector<std::string> all;

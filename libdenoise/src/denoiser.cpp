@@ -20,16 +20,17 @@ int64_t defaultSkip(const ModelInfo& info) {
 }  // namespace
 
 torch::Tensor imageToTensor(const Image& image) {
-  auto hwc = torch::from_blob(const_cast<float*>(image.pixels.data()),
-                              {image.height, image.width, image.channels}, torch::kFloat32);
-  return hwc.permute({2, 0, 1}).unsqueeze(0).contiguous();
+  return imageRegionToTensor(image, 0, 0, image.height, image.width);
 }
 
 Image tensorToImage(const torch::Tensor& tensor) {
-  auto hwc = tensor.squeeze(0).permute({1, 2, 0}).contiguous().to(torch::kFloat32);
-  Image image(static_cast<int>(hwc.size(1)), static_cast<int>(hwc.size(0)),
-              static_cast<int>(hwc.size(2)));
-  std::copy_n(hwc.data_ptr<float>(), image.size(), image.pixels.begin());
+  const auto chw = tensor.squeeze(0);
+  Image image(static_cast<int>(chw.size(2)), static_cast<int>(chw.size(1)),
+              static_cast<int>(chw.size(0)));
+  // Straight into the image's pixels: no intermediate full-frame copy.
+  torch::from_blob(image.pixels.data(), {image.height, image.width, image.channels},
+                   torch::kFloat32)
+      .copy_(chw.permute({1, 2, 0}));
   return image;
 }
 
@@ -69,15 +70,15 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   const ModelInfo& mi = info();
   const tonemap::Curve curve = tonemap::curveFromName(mi.tonemap);
 
-  // Inputs in model space, full frame.
-  const torch::Tensor radiance = imageToTensor(frame.get("color"));
-  const torch::Tensor cond = modelSpaceFromTonemapped(tonemapRadiance(radiance, curve));
-  torch::Tensor aux;
-  if (!mi.input_buffers.empty()) {
-    std::vector<torch::Tensor> parts;
-    for (const auto& name : mi.input_buffers) parts.push_back(imageToTensor(frame.get(name)));
-    aux = normalizeAux(torch::cat(parts, 1), mi.input_buffers, curve);
-  }
+  // The radiance in model space is full-frame (the sampler starts from it); the
+  // aux inputs, ten times as many channels, are normalized per tile on demand.
+  const torch::Tensor cond =
+      modelSpaceFromTonemapped(tonemapRadiance(imageToTensor(frame.get("color")), curve));
+  auto auxOf = [&](const TileRect& r) {
+    return mi.input_buffers.empty()
+               ? torch::Tensor()
+               : normalizedAuxRegion(frame, mi.input_buffers, curve, r.y0, r.x0, r.height, r.width);
+  };
 
   const NoiseSchedule schedule = options.respacing.empty()
                                      ? mi.samplingSchedule()
@@ -101,15 +102,13 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   const Tiler tiler(frame.height, frame.width, tile, options.overlap);
   ConditionalDenoiser& net = *model_.model;
   DenoiseFn fn = [&](const torch::Tensor& z_t, const torch::Tensor& t) {
-    return tiler.apply({z_t, cond, aux}, [&](const std::vector<torch::Tensor>& v) {
-      return net.predict(v[0], t, v[1], v[2]);
-    });
+    return tiler.apply(
+        [&](const TileRect& r) { return net.predict(crop(z_t, r), t, crop(cond, r), auxOf(r)); });
   };
   auto sampleOnce = [&](int k) {
     if (regression) {
-      auto x0 = tiler.apply({cond, aux}, [&](const std::vector<torch::Tensor>& v) {
-        return regressDirect(net, v[0], v[1]);
-      });
+      auto x0 = tiler.apply(
+          [&](const TileRect& r) { return regressDirect(net, crop(cond, r), auxOf(r)); });
       if (options.progress) options.progress(1.0);
       return x0.clamp(-1.0, 1.0);
     }

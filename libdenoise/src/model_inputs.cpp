@@ -108,4 +108,23 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
   return torch::cat(parts, 1);
 }
 
+torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, int64_t height,
+                                  int64_t width) {
+  auto hwc = torch::from_blob(const_cast<float*>(image.pixels.data()),
+                              {image.height, image.width, image.channels}, torch::kFloat32);
+  auto region = torch::empty({1, image.channels, height, width}, torch::kFloat32);
+  // copy_ always copies; contiguous() would alias the image for one channel.
+  region[0].copy_(hwc.narrow(0, y0, height).narrow(1, x0, width).permute({2, 0, 1}));
+  return region;
+}
+
+torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,
+                                  const std::vector<std::string>& buffers, tonemap::Curve curve,
+                                  int64_t y0, int64_t x0, int64_t height, int64_t width) {
+  std::vector<torch::Tensor> parts;
+  for (const auto& name : buffers)
+    parts.push_back(imageRegionToTensor(frame.get(name), y0, x0, height, width));
+  return normalizeAux(torch::cat(parts, 1), buffers, curve);
+}
+
 }  // namespace dn

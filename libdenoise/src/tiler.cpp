@@ -55,25 +55,34 @@ torch::Tensor Tiler::weights(const TileRect& r) const {
   return (wy.unsqueeze(1) * wx.unsqueeze(0)).view({1, 1, r.height, r.width});
 }
 
+torch::Tensor crop(const torch::Tensor& tensor, const TileRect& r) {
+  return tensor.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width);
+}
+
 torch::Tensor Tiler::apply(
     const std::vector<torch::Tensor>& inputs,
     const std::function<torch::Tensor(const std::vector<torch::Tensor>&)>& fn) const {
-  if (tiles_.size() == 1) return fn(inputs);
+  return apply([&](const TileRect& r) {
+    std::vector<torch::Tensor> slices;
+    for (const auto& in : inputs) slices.push_back(in.defined() ? crop(in, r) : in);
+    return fn(slices);
+  });
+}
+
+torch::Tensor Tiler::apply(const std::function<torch::Tensor(const TileRect&)>& fn) const {
+  if (tiles_.size() == 1) return fn(tiles_.front());
   torch::Tensor sum, weightSum;
   for (const auto& r : tiles_) {
-    std::vector<torch::Tensor> slices;
-    for (const auto& in : inputs)
-      slices.push_back(in.defined() ? in.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width) : in);
-    torch::Tensor out = fn(slices);
+    torch::Tensor out = fn(r);
     if (!sum.defined()) {
       sum = torch::zeros({out.size(0), out.size(1), height_, width_}, out.options());
       weightSum = torch::zeros({1, 1, height_, width_}, out.options());
     }
     torch::Tensor w = weights(r).to(out.options());
-    sum.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width).add_(out * w);
-    weightSum.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width).add_(w);
+    crop(sum, r).add_(out * w);
+    crop(weightSum, r).add_(w);
   }
-  return sum / weightSum.clamp_min(1e-12);
+  return sum.div_(weightSum.clamp_min_(1e-12));  // in place: one full-frame output, not two
 }
 
 int64_t tileSizeForMemory(double bytes, double bytesPerPixel, int64_t multiple) {

@@ -34,6 +34,10 @@ std::pair<std::string, std::vector<std::string>> parseChannelOverride(const std:
 // One frame from a single (usually multilayer) image file. "color" is required.
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options = {});
 
+// The canonical buffers readFrame would find in the file (options.only aside),
+// in canonical order, from the header alone: no pixels are read.
+std::vector<std::string> availableBuffers(const std::string& path, const ReadOptions& options = {});
+
 // Every channel name of a file (all parts), for listings and layer lookups.
 std::vector<std::string> channelNames(const std::string& path);
 

@@ -8,7 +8,7 @@
 
 #include <torch/torch.h>
 
-#include "dn/buffers.h"  // defaultAuxBuffers()
+#include "dn/buffers.h"  // defaultAuxBuffers(), FrameBuffers
 #include "dn/tonemap.h"
 
 namespace dn {
@@ -27,5 +27,17 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
 
 // Total channel count of the named canonical buffers; throws on an unknown name.
 int64_t auxChannelCount(const std::vector<std::string>& buffers);
+
+// A rectangle of an image as a (1,C,height,width) float tensor (copied).
+torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, int64_t height,
+                                  int64_t width);
+
+// normalizeAux of the frame's `buffers` over one rectangle: the same numbers as
+// normalizing the whole frame and cropping, but a frame's worth of aux channels
+// (35 floats per pixel) never exists at once. Throws std::out_of_range naming a
+// buffer the frame lacks.
+torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,
+                                  const std::vector<std::string>& buffers, tonemap::Curve curve,
+                                  int64_t y0, int64_t x0, int64_t height, int64_t width);
 
 }  // namespace dn

@@ -16,6 +16,9 @@ struct TileRect {
   int64_t y0, x0, height, width;
 };
 
+// The rectangle's pixels of an (N,C,H,W) tensor (a view, no copy).
+torch::Tensor crop(const torch::Tensor& tensor, const TileRect& r);
+
 class Tiler {
  public:
   // tile <= 0 or >= the frame: one tile. The overlap is clamped to tile / 2.
@@ -31,6 +34,9 @@ class Tiler {
   torch::Tensor apply(
       const std::vector<torch::Tensor>& inputs,
       const std::function<torch::Tensor(const std::vector<torch::Tensor>&)>& fn) const;
+  // The same with fn building each tile's inputs itself from its rectangle, so
+  // inputs that are cheap to derive per pixel need not exist at full-frame size.
+  torch::Tensor apply(const std::function<torch::Tensor(const TileRect&)>& fn) const;
 
  private:
   torch::Tensor weights(const TileRect& r) const;  // (1,1,h,w)
