@@ -6,7 +6,10 @@ example render resized with oiiotool (every layer kept), so the network sees
 real buffers.
 
   dndenoise_bench.py --bin build/bin --model models/default.dnm [--sizes 1920x1080,3840x2160]
-                     [--maxmem 3000] [--steps N --skip S]
+                     [--maxmem 3000] [--steps N --skip S] [--all-layers]
+
+The result is written with --rgb-only unless --all-layers asks for dndenoise's
+default output (every input layer copied beside the result).
 """
 import argparse
 import os
@@ -38,9 +41,12 @@ def main():
     ap.add_argument("--maxmem", default="3000")
     ap.add_argument("--steps")
     ap.add_argument("--skip")
+    ap.add_argument("--all-layers", action="store_true", help="write every input layer, not --rgb-only")
     args = ap.parse_args()
     extra = (["--steps", args.steps] if args.steps else []) + (["--skip", args.skip] if args.skip else [])
-    print(f"model {args.model}; --maxmem {args.maxmem} MB; {os.cpu_count()} cores")
+    extra += [] if args.all_layers else ["--rgb-only"]
+    output = "every input layer and the result" if args.all_layers else "--rgb-only"
+    print(f"model {args.model}; --maxmem {args.maxmem} MB; {os.cpu_count()} cores; output {output}")
     print(f"{'frame':>10} {'steps':>5} {'tiles':>5} {'tile px':>7} {'seconds':>8} {'s/MPix':>8} "
           f"{'s/MPix/step':>11} {'peak RSS GB':>11}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -48,7 +54,7 @@ def main():
             frame = os.path.join(tmp, f"frame_{size}.exr")
             subprocess.run(["oiiotool", EXAMPLE, "--resize", size, "-o", frame], check=True)
             r = run_timed([os.path.join(args.bin, "dndenoise"), "--model", args.model, "--maxmem", args.maxmem,
-                           "-v", "--rgb-only", frame, "-o", os.path.join(tmp, "out.exr")] + extra)
+                           "-v", frame, "-o", os.path.join(tmp, "out.exr")] + extra)
             print(f"{size:>10} {r['steps']:>5} {r['tiles']:>5} {r['tile']:>7} {r['seconds']:>8.1f} "
                   f"{r['s_per_mpix']:>8.2f} {r['s_per_mpix'] / r['steps']:>11.3f} {r['rss_gb']:>11.2f}")
 
