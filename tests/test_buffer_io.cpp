@@ -2,6 +2,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -115,6 +116,29 @@ TEST_CASE("overrides map any channels to a buffer, and 'only' limits loading") {
   CHECK(parsed.second == std::vector<std::string>{"N.x", "N.y", "N.z"});
   CHECK_THROWS_AS(parseChannelOverride("normal=N.x,N.y"), std::invalid_argument);
   CHECK_THROWS_AS(parseChannelOverride("nothing=R,G,B"), std::invalid_argument);
+}
+
+TEST_CASE("available buffers: what readFrame would load, from the header") {
+  TempDir dir;
+  writeBlenderLike(dir / "frame.exr", 4, 3);
+  const std::vector<std::string> all = {"color", "albedo",          "normal",
+                                        "depth", "glossy_indirect", "roughness"};
+  CHECK(availableBuffers(dir / "frame.exr") == all);
+  CHECK(readFrame(dir / "frame.exr").names() == all);
+  ReadOptions options;
+  options.overrides["diffuse_direct"] = {"ViewLayer.GlossInd.R", "ViewLayer.GlossInd.G",
+                                         "ViewLayer.GlossInd.B"};
+  options.only = {"color"};  // ignored: the listing is of the file
+  auto withOverride = availableBuffers(dir / "frame.exr", options);
+  CHECK(std::find(withOverride.begin(), withOverride.end(), "diffuse_direct") !=
+        withOverride.end());
+  CHECK(withOverride.size() == all.size() + 1);
+  options.viewLayer = "Other";
+  CHECK(errorOf([&] {
+          availableBuffers(dir / "frame.exr", options);
+        }).find("has no view layer 'Other'") != std::string::npos);
+  CHECK(errorOf([&] { availableBuffers(dir / "missing.exr"); }).find("missing.exr: no such file") !=
+        std::string::npos);
 }
 
 TEST_CASE("plain RGB files and other renderers' names") {
