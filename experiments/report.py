@@ -356,7 +356,7 @@ def speed_section(run):
              f"{run.plan['settings']['THREADS']}.", ""]
     unit = run.speed("oidn")
     rows = [(m, run.speed(m["name"])) for m in run.methods]
-    rows = [(m, s) for m, s in rows if s]
+    rows = [(m, s) for m, s in rows if s and m["spps"]]  # skipped methods: stale timings
     if not rows:
         return lines + ["No method was timed.", ""]
     lines += ["| method | command arguments | s / megapixel | × OIDN | fixed cost (s) | load average |",
