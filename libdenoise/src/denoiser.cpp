@@ -127,8 +127,8 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   torch::Tensor sum, sumSquares;
   for (int k = 0; k < samples; ++k) {
     torch::Tensor hdr = inverseTonemapRadiance(tonemappedFromModelSpace(sampleOnce(k)), curve);
-    sum = k == 0 ? hdr.clone() : sum + hdr;
-    sumSquares = k == 0 ? hdr * hdr : sumSquares + hdr * hdr;
+    if (samples > 1) sumSquares = k == 0 ? hdr * hdr : sumSquares + hdr * hdr;
+    sum = k == 0 ? hdr : sum + hdr;  // hdr is a fresh tensor every sample
   }
 
   DenoiseResult result;

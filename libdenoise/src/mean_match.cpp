@@ -1,6 +1,7 @@
 #include "dn/mean_match.h"
 
 #include <cmath>
+#include <vector>
 
 #include "dn/tonemap.h"
 
@@ -8,11 +9,26 @@ namespace dn {
 
 namespace {
 
-torch::Tensor gaussianKernel(double sigma) {
+std::vector<double> gaussianKernel(double sigma) {
   const auto radius = static_cast<int64_t>(std::ceil(3.0 * sigma));
-  auto x = torch::arange(-radius, radius + 1, torch::kFloat64);
-  auto k = torch::exp(-0.5 * (x / sigma).pow(2));
-  return (k / k.sum()).to(torch::kFloat32);
+  std::vector<double> k;
+  double sum = 0.0;
+  for (int64_t x = -radius; x <= radius; ++x) {
+    k.push_back(std::exp(-0.5 * (x / sigma) * (x / sigma)));
+    sum += k.back();
+  }
+  for (auto& w : k) w /= sum;
+  return k;
+}
+
+// One 1-D pass along `dim` of an image padded by the kernel radius on that axis.
+// A sum of shifted slices: at 4K it needs half the temporary memory of conv2d.
+torch::Tensor blurAlong(const torch::Tensor& padded, const std::vector<double>& k, int64_t dim) {
+  const int64_t size = padded.size(dim) - static_cast<int64_t>(k.size()) + 1;
+  auto out = padded.narrow(dim, 0, size) * k[0];
+  for (std::size_t i = 1; i < k.size(); ++i)
+    out.add_(padded.narrow(dim, static_cast<int64_t>(i), size), k[i]);
+  return out;
 }
 
 }  // namespace
@@ -20,16 +36,13 @@ torch::Tensor gaussianKernel(double sigma) {
 torch::Tensor gaussianBlur(const torch::Tensor& image, double sigma) {
   if (sigma <= 0.0) return image;
   namespace F = torch::nn::functional;
-  const int64_t channels = image.size(1);
-  const auto k = gaussianKernel(sigma).to(image.dtype());
-  const int64_t radius = (k.size(0) - 1) / 2;
-  // Separable: rows, then columns; one group per channel.
-  auto horizontal = k.view({1, 1, 1, -1}).expand({channels, 1, 1, k.size(0)});
-  auto vertical = k.view({1, 1, -1, 1}).expand({channels, 1, k.size(0), 1});
-  auto x =
-      F::pad(image, F::PadFuncOptions({radius, radius, radius, radius}).mode(torch::kReplicate));
-  x = F::conv2d(x, horizontal, F::Conv2dFuncOptions().groups(channels));
-  return F::conv2d(x, vertical, F::Conv2dFuncOptions().groups(channels));
+  const auto k = gaussianKernel(sigma);
+  const auto r = static_cast<int64_t>(k.size() - 1) / 2;
+  auto pad = [&](const torch::Tensor& x, std::vector<int64_t> sides) {
+    return F::pad(x, F::PadFuncOptions(sides).mode(torch::kReplicate));
+  };
+  auto rows = blurAlong(pad(image, {r, r, 0, 0}), k, 3);
+  return blurAlong(pad(rows, {0, 0, r, r}), k, 2);
 }
 
 torch::Tensor matchLocalMean(const torch::Tensor& denoised, const torch::Tensor& render,
