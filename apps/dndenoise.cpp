@@ -243,13 +243,9 @@ void checkAgainstReference(const Options& o, const Image& result, int& status) {
 // One line naming what the model needs when `has` lacks some of it.
 void checkModelInputs(const Denoiser& denoiser, const std::string& name,
                       const std::vector<std::string>& has) {
-  const auto& needed = denoiser.info().input_buffers;
-  if (std::all_of(needed.begin(), needed.end(), [&](const std::string& b) {
-        return std::find(has.begin(), has.end(), b) != has.end();
-      }))
-    return;
+  if (denoiser.missingBuffers(has).empty()) return;
   std::string needs, hasList;
-  for (const auto& b : needed) needs += (needs.empty() ? "" : ", ") + b;
+  for (const auto& b : denoiser.info().input_buffers) needs += (needs.empty() ? "" : ", ") + b;
   for (const auto& b : has) hasList += (hasList.empty() ? "" : ", ") + b;
   throw IoError(fmt::format(
       "{}: the model needs {}; the file has {} (enable Denoising Data and the light passes, or "

@@ -38,10 +38,11 @@ Denoiser::Denoiser(LoadedModel model) : model_(std::move(model)) { model_.model-
 
 Denoiser Denoiser::fromFile(const std::string& path) { return Denoiser(loadModelFile(path)); }
 
-std::vector<std::string> Denoiser::missingBuffers(const FrameBuffers& frame) const {
+std::vector<std::string> Denoiser::missingBuffers(const std::vector<std::string>& available) const {
   std::vector<std::string> missing;
   for (const auto& name : info().input_buffers)
-    if (!frame.has(name)) missing.push_back(name);
+    if (std::find(available.begin(), available.end(), name) == available.end())
+      missing.push_back(name);
   return missing;
 }
 
@@ -59,7 +60,7 @@ double Denoiser::bytesPerPixel() const {
 }
 
 DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions& options) const {
-  auto missing = missingBuffers(frame);
+  auto missing = missingBuffers(frame.names());
   if (!missing.empty()) {
     std::string list;
     for (const auto& m : missing) list += (list.empty() ? "" : ", ") + m;

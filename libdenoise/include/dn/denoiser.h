@@ -47,8 +47,9 @@ class Denoiser {
   static Denoiser fromFile(const std::string& path);  // throws ModelError
 
   const ModelInfo& info() const { return model_.info; }
-  // Buffers the model needs that the frame lacks (empty: ready to denoise).
-  std::vector<std::string> missingBuffers(const FrameBuffers& frame) const;
+  // Buffers the model needs that are not among `available` (empty: ready to
+  // denoise); `available` as FrameBuffers::names() or dn::availableBuffers give it.
+  std::vector<std::string> missingBuffers(const std::vector<std::string>& available) const;
   // Estimated activation bytes per pixel of one network evaluation (for tiling).
   double bytesPerPixel() const;
 
