@@ -41,13 +41,20 @@ model and sampling:
   --model FILE        model file (default: $DN_MODEL, else the shipped models/default.dnm)
   --steps N           diffusion steps of the respaced schedule (default: the model's, 27)
   --skip S            skip the S noisiest steps, starting from the noised render
-                      (default: the model's tuned value)
+                      (default: the model's tuned value, adapted to the input's spp)
+  --spp N             the input's samples per pixel (default: the file's Cycles
+                      metadata, else unknown); scales the default skip and
+                      --mean-match to the render's noise level (docs/dndenoise.md)
   --sampler ddpm|ddim sampler (default ddpm); --eta E for DDIM
   --seed N            random seed (default 0): same seed, same output
   --samples K         mean of K samples, plus their standard deviation as an
                       'uncertainty' layer
+  --exposure auto|K   scale the radiance by K before the model and back after;
+                      auto (default) brings the frame's mean brightness to what
+                      the model was trained on
   --mean-match SIGMA  rescale the result so its local mean (Gaussian, SIGMA px)
-                      matches the render's, which is unbiased (default 2; 0 = off)
+                      matches the render's, which is unbiased (default 2 at the
+                      model's default spp, scaled by 1/sqrt(spp); 0 = off)
 input buffers:
   --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
@@ -115,6 +122,14 @@ Options parseArgs(int argc, char** argv) {
       o.denoise.sampler = s == "ddim" ? SamplerKind::Ddim : SamplerKind::Ddpm;
     } else if (args.flag("--eta")) {
       o.denoise.eta = args.doubleValue("--eta");
+    } else if (args.flag("--spp")) {
+      o.denoise.spp = args.intValue("--spp");
+      if (o.denoise.spp < 1) throw cli::UsageError("--spp must be at least 1");
+    } else if (args.flag("--exposure")) {
+      const std::string v = args.value("--exposure");
+      o.denoise.exposure = v == "auto" ? 0.0 : cli::Args::toDouble("--exposure", v);
+      if (!(o.denoise.exposure >= 0.0) || (v != "auto" && o.denoise.exposure == 0.0))
+        throw cli::UsageError("--exposure must be auto or a positive number");
     } else if (args.flag("--seed")) {
       o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed"));
     } else if (args.flag("--samples")) {
@@ -320,9 +335,12 @@ int run(Options o) {
       std::sort(times.begin(), times.end());
       fmt::print(
           stderr,
-          "dndenoise: {}: {} steps, {} tile(s) of {} px, {:.2f} s (median of {}), {:.2f} s/MPix\n",
-          name, result.steps, result.tileCount, result.tileSize, times[times.size() / 2],
-          times.size(), times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
+          "dndenoise: {}: {} spp, exposure x{:.3g}, skip {}, {} steps, mean matching {:.2g} px, "
+          "{} tile(s) of {} px, {:.2f} s (median of {}), {:.2f} s/MPix\n",
+          name, result.plan.spp > 0 ? std::to_string(result.plan.spp) : "unknown", result.exposure,
+          result.plan.skip, result.steps, result.plan.meanMatchSigma, result.tileCount,
+          result.tileSize, times[times.size() / 2], times.size(),
+          times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     }
 
     WriteOptions write;

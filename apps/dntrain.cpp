@@ -2,7 +2,7 @@
 //   dntrain base    --data DIR --photos DIR --out base.dnm     pretrain the prior
 //   dntrain control --data DIR --base base.dnm --out model.dnm  train the Control Module
 //   dntrain regression --data DIR --base base.dnm --out reg.dnm the single-pass ablation
-//   dntrain defaults --model M --respacing 27 --default-skip 18  tuned sampling defaults
+//   dntrain defaults --model M --respacing 27 --default-skip 18 --default-spp 4 ...  tuned defaults
 #include <fmt/format.h>
 #include <torch/torch.h>
 
@@ -37,7 +37,9 @@ const char* kUsage =
     R"(usage: dntrain base    --data DIR [--photos DIR ...] --out base.dnm [options]
        dntrain control --data DIR --base base.dnm --out model.dnm [options]
        dntrain regression --data DIR --base base.dnm --out reg.dnm [options]
-       dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--out FILE]
+       dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--default-spp N]
+                        [--exposure-target Y] [--out FILE]
+       dntrain prior --model model.dnm --out base.dnm
 
 base     pretrains the pixel-space prior on clean images (the data set's ground
          truths and photographs) conditioned on a degraded copy of each.
@@ -49,6 +51,8 @@ regression  the ablation: the same networks (prior + Control Module, initialised
 defaults sets the sampling a model file gives dndenoise when no --steps/--skip
          are passed (after tuning them on a validation split); rewrites --model
          in place unless --out is given. The weights are not touched.
+prior    writes the frozen prior inside a controlled model as a model of its own
+         (the "no Control Module" ablation), with the same sampling defaults.
 
 options:
   --data DIR            data set root (docs/dataset.md); training uses split 'train'
@@ -66,6 +70,10 @@ options:
   --base-channels N --res-blocks N   prior size (base only; default: the UNet defaults)
   --default-skip S      skip stored in the model for dndenoise (default: 18 control, 0 base)
   --respacing SPEC      defaults: steps stored in the model for dndenoise ("27", "super27")
+  --default-spp N       defaults: the spp the default skip was tuned at; dndenoise
+                        scales skip and mean matching to other spp from it
+  --exposure-target Y   defaults: dndenoise scales each frame so the mean of its
+                        luminance (clamped to 6) is Y
   --model FILE          defaults: the model file to change
   --val-every N         validation every N steps (default 250; 0 disables)
   --log FILE            JSON-lines log (default: OUT.log.jsonl)
@@ -91,7 +99,8 @@ struct Options {
   std::string aux = "default", prediction = "eps";
   std::vector<int> spp = {4, 16, 64};
   int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
-          resBlocks = 0, defaultSkip = -1;
+          resBlocks = 0, defaultSkip = -1, defaultSpp = -1;
+  double exposureTarget = -1.0;
   double lr = 2e-4, ema = 0.999, checkpointMinutes = 5;
   uint64_t seed = 1;
   int threads = 0;
@@ -161,6 +170,10 @@ Options parseArgs(int argc, char** argv) {
       o.resBlocks = args.intValue("--res-blocks");
     else if (args.flag("--default-skip"))
       o.defaultSkip = args.intValue("--default-skip");
+    else if (args.flag("--exposure-target"))
+      o.exposureTarget = args.doubleValue("--exposure-target");
+    else if (args.flag("--default-spp"))
+      o.defaultSpp = args.intValue("--default-spp");
     else if (args.flag("--respacing"))
       o.respacing = args.value("--respacing");
     else if (args.flag("--model"))
@@ -194,14 +207,23 @@ Options parseArgs(int argc, char** argv) {
   }
   if (o.mode == "defaults") {
     if (o.model.empty()) throw cli::UsageError("defaults needs --model");
-    if (o.respacing.empty() && o.defaultSkip < 0)
-      throw cli::UsageError("defaults needs --respacing and/or --default-skip");
+    if (o.respacing.empty() && o.defaultSkip < 0 && o.defaultSpp < 0 && o.exposureTarget == -1.0)
+      throw cli::UsageError(
+          "defaults needs one of --respacing, --default-skip, --default-spp, --exposure-target");
+    if (o.exposureTarget != -1.0 && !(o.exposureTarget > 0.0 && o.exposureTarget < 6.0))
+      throw cli::UsageError("--exposure-target must be in (0, 6)");
+    if (o.defaultSpp == 0 || o.defaultSpp < -1)
+      throw cli::UsageError("--default-spp must be at least 1");
     if (o.out.empty()) o.out = o.model;
+    return o;
+  }
+  if (o.mode == "prior") {
+    if (o.model.empty() || o.out.empty()) throw cli::UsageError("prior needs --model and --out");
     return o;
   }
   if (o.mode != "base" && o.mode != "control" && o.mode != "regression")
     throw cli::UsageError(
-        "first argument must be base, control, regression or defaults (see --help)");
+        "first argument must be base, control, regression, defaults or prior (see --help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
   if (o.mode != "base" && (o.base.empty() || o.data.empty()))
     throw cli::UsageError(o.mode + " needs --base and --data");
@@ -349,6 +371,8 @@ int setDefaults(const Options& o) {
   ModelInfo& info = loaded.info;
   if (!o.respacing.empty()) info.respacing = o.respacing;
   if (o.defaultSkip >= 0) info.notes["default_skip"] = std::to_string(o.defaultSkip);
+  if (o.defaultSpp > 0) info.notes["default_spp"] = std::to_string(o.defaultSpp);
+  if (o.exposureTarget > 0) info.notes["exposure_target"] = fmt::format("{}", o.exposureTarget);
   auto& skip = info.notes["default_skip"];
   if (skip.empty()) skip = "0";
   try {
@@ -357,12 +381,30 @@ int setDefaults(const Options& o) {
     throw cli::UsageError(std::string("bad sampling defaults: ") + e.what());
   }
   saveModelFile(o.out, info, *loaded.model);
-  fmt::print(stderr, "dntrain: {}: respacing {}, skip {}\n", o.out, info.respacing, skip);
+  auto spp = info.notes.find("default_spp");
+  auto exposure = info.notes.find("exposure_target");
+  fmt::print(stderr, "dntrain: {}: respacing {}, skip {}, tuned at {} spp, exposure target {}\n",
+             o.out, info.respacing, skip, spp == info.notes.end() ? "unknown" : spp->second,
+             exposure == info.notes.end() ? "none" : exposure->second);
+  return cli::kExitOk;
+}
+
+// dntrain prior: the base prior of a controlled model as a plain model file.
+int extractPrior(const Options& o) {
+  const LoadedModel loaded = loadModelFile(o.model);
+  if (!loaded.info.has_control) throw IoError(o.model + ": has no Control Module; it is a prior");
+  ModelInfo info = loaded.info;
+  info.has_control = false;
+  info.input_buffers.clear();
+  info.notes["extracted_from"] = fs::path(o.model).filename().string();
+  saveModelFile(o.out, info, PriorDenoiser(loaded.prior()));
+  fmt::print(stderr, "dntrain: {}: the prior of {}\n", o.out, o.model);
   return cli::kExitOk;
 }
 
 int run(const Options& o) {
   if (o.mode == "defaults") return setDefaults(o);
+  if (o.mode == "prior") return extractPrior(o);
   // Debian's LibTorch starts with one thread: use every core unless told otherwise.
   torch::set_num_threads(o.threads > 0 ? o.threads
                                        : static_cast<int>(std::thread::hardware_concurrency()));

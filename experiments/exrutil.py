@@ -63,8 +63,9 @@ def write_atomic(path, channels, header=None, compression=OpenEXR.ZIP_COMPRESSIO
     """Writes {name: 2-D array} to path via a temporary file in the same folder."""
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     out_header = {"compression": compression, "type": OpenEXR.scanlineimage}
-    for key in ("Camera", "Frame", "Scene", "BlenderMultiChannel"):
-        if header and key in header:
+    for key in (header or {}):
+        if key in ("Camera", "Frame", "Scene", "BlenderMultiChannel") or (
+                key.startswith("cycles.") and key.endswith(".samples")):  # the sample count
             out_header[key] = header[key]
     tmp = f"{path}.tmp{os.getpid()}.exr"
     try:

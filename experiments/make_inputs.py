@@ -4,7 +4,8 @@
   make_inputs.py scene SRC --frames frame_0 frame_1 --spps 4 16 --inputs DIR --refs DIR
       For every frame and spp N: DIR/<frame>_sppN.exr, the mean of the frame's first
       N / stack_spp stacks over EVERY channel (colour and aux buffers alike), with the
-      stacks' Blender channel names, so each tool reads it like a real render.
+      stacks' Blender channel names and the sample count in the Cycles metadata
+      (cycles.<view layer>.samples = N), so each tool reads it like a real render.
       The colour is stored as float32, other channels keep the stacks' pixel type.
       And DIR/<frame>.exr: the reference colour (gt_clean.exr if present, else the mean
       of gt_a.exr and gt_b.exr), plain float32 RGB.
@@ -62,6 +63,11 @@ def average_stacks(frame_dir, spp):
     for name, pixels in total.items():
         mean = pixels / len(paths)
         averaged[name] = mean.astype(np.float32 if name in color else first_types[name])
+    # The mean of N/stack_spp independent renders is an N-spp render: record it
+    # where Cycles does ("cycles.<view layer>.samples"), as a real render would.
+    header = dict(header)
+    for key in [k for k in header if k.startswith("cycles.") and k.endswith(".samples")]:
+        header[key] = str(spp)
     return averaged, header
 
 

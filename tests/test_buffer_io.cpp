@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 
 #include <unistd.h>
 
@@ -35,7 +36,8 @@ struct TempDir {
 float code(int layer, int i, int c) { return layer + 0.01f * i + 0.001f * c; }
 
 // A Blender-style multilayer EXR: ViewLayer.<Pass>.<Chan>, with a metadata entry.
-void writeBlenderLike(const std::string& path, int w, int h) {
+void writeBlenderLike(const std::string& path, int w, int h,
+                      const std::map<std::string, std::string>& attributes = {}) {
   const std::vector<std::vector<std::string>> layers = {
       {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B",
        "ViewLayer.Combined.A"},
@@ -51,6 +53,7 @@ void writeBlenderLike(const std::string& path, int w, int h) {
   OIIO::ImageSpec spec(w, h, static_cast<int>(names.size()), OIIO::TypeDesc::FLOAT);
   spec.channelnames = names;
   spec.attribute("Note", "rendered by a test");
+  for (const auto& [name, value] : attributes) spec.attribute(name, value);
   std::vector<float> pixels(static_cast<std::size_t>(w) * h * names.size());
   for (int i = 0; i < w * h; ++i) {
     int k = 0;
@@ -98,6 +101,22 @@ TEST_CASE("Blender multilayer buffers are found by name") {
   CHECK(frame.get("depth").channels == 1);
   CHECK(frame.get("roughness").at(0, 1, 0) == doctest::Approx(code(5, 4, 0)));
   CHECK(layerPrefixOf(frame) == "ViewLayer.");
+}
+
+TEST_CASE("the sample count Cycles records is read from the colour's view layer") {
+  TempDir dir;
+  writeBlenderLike(dir / "plain.exr", 2, 2);
+  CHECK(readFrame(dir / "plain.exr").samplesPerPixel == 0);
+  writeBlenderLike(dir / "one.exr", 2, 2, {{"cycles.ViewLayer.samples", "16"}});
+  CHECK(readFrame(dir / "one.exr").samplesPerPixel == 16);
+  writeBlenderLike(dir / "two.exr", 2, 2,
+                   {{"cycles.Other.samples", "4"}, {"cycles.ViewLayer.samples", "64"}});
+  CHECK(readFrame(dir / "two.exr").samplesPerPixel == 64);
+  writeBlenderLike(dir / "ambiguous.exr", 2, 2,
+                   {{"cycles.A.samples", "4"}, {"cycles.B.samples", "64"}});
+  CHECK(readFrame(dir / "ambiguous.exr").samplesPerPixel == 0);
+  writeBlenderLike(dir / "bad.exr", 2, 2, {{"cycles.ViewLayer.samples", "many"}});
+  CHECK(readFrame(dir / "bad.exr").samplesPerPixel == 0);
 }
 
 TEST_CASE("overrides map any channels to a buffer, and 'only' limits loading") {

@@ -308,6 +308,18 @@ TEST_CASE("model files round-trip; damaged files fail naming the file") {
   auto legacy = kernelModelInfoToText(info);
   legacy.erase(legacy.find("kernel.demodulate=1\n"), std::string("kernel.demodulate=1\n").size());
   CHECK_FALSE(kernelModelInfoFromText(legacy, "legacy").net.demodulate);
+  // Older still: no centre-weight key either, so the weights' meaning is unknown.
+  const std::string centre_key = "kernel.centre_weight=sigmoid4\n";
+  REQUIRE(legacy.find(centre_key) != std::string::npos);
+  auto oldest = legacy;
+  oldest.erase(oldest.find(centre_key), centre_key.size());
+  CHECK_THROWS_WITH_AS(kernelModelInfoFromText(oldest, "oldest.dnk"),
+                       doctest::Contains("centre weight"), ModelError);
+  auto other_centre = legacy;
+  other_centre.replace(other_centre.find(centre_key), centre_key.size(),
+                       "kernel.centre_weight=softplus\n");
+  CHECK_THROWS_WITH_AS(kernelModelInfoFromText(other_centre, "other.dnk"),
+                       doctest::Contains("softplus"), ModelError);
   CHECK(loaded.info.notes.at("data") == "/some/data set");
   auto radiance = torch::rand({1, 3, 12, 12}), aux = torch::rand({1, 6, 12, 12});
   torch::NoGradGuard no_grad;

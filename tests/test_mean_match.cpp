@@ -5,6 +5,7 @@
 
 #include "doctest_torch.h"
 
+#include "dn/highlights.h"
 #include "dn/mean_match.h"
 
 using namespace dn;
@@ -69,4 +70,22 @@ TEST_CASE("matchLocalMean bounds the correction and survives non-finite renders"
   render[0][0][3][3] = std::numeric_limits<float>::quiet_NaN();
   render[0][1][4][4] = std::numeric_limits<float>::infinity();
   CHECK(torch::isfinite(matchLocalMean(denoised, render, 2.0)).all().item<bool>());
+}
+
+TEST_CASE("restoreHighlights keeps lights above the range, not isolated fireflies") {
+  auto render = torch::full({1, 3, 12, 12}, 0.5);
+  render.narrow(2, 2, 4).narrow(3, 2, 4).fill_(20.0);  // a 4x4 light
+  render[0][0][9][9] = 50.0;                           // a firefly, red only
+  auto denoised = render.clamp_max(6.0);               // the model's clipped output
+  denoised[0][0][9][9] = 0.5;                          // with the firefly removed
+  const auto out = restoreHighlights(denoised, render, 6.0);
+  CHECK(out[0][1][3][3].item<double>() == 20.0);  // inside the light
+  CHECK(out[0][2][2][2].item<double>() == 20.0);  // its corner: eroded, then dilated back
+  CHECK(out[0][0][9][9].item<double>() == 0.5);   // the firefly stays removed
+  CHECK(torch::equal(out.narrow(3, 7, 5), denoised.narrow(3, 7, 5)));
+  // Below the range nothing changes; NaN and Inf in the render do not leak.
+  CHECK(torch::equal(restoreHighlights(denoised, render, 25.0), denoised));
+  render[0][1][3][3] = std::numeric_limits<float>::quiet_NaN();
+  render.narrow(2, 2, 4).narrow(3, 2, 4)[0][2] = std::numeric_limits<float>::infinity();
+  CHECK(torch::isfinite(restoreHighlights(denoised, render, 6.0)).all().item<bool>());
 }

@@ -1,6 +1,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 #include "dn/ocio_preview.h"
@@ -65,4 +66,28 @@ TEST_CASE("OpenColorIO preview maps scene-linear to display range") {
   CHECK(img.pixels[8] > img.pixels[4]);
   CHECK(img.pixels[3] == 1.0f);  // alpha untouched
   CHECK_FALSE(tmo::ocioDescribeConfig().empty());
+}
+
+TEST_CASE("autoexposure scales the clamped mean luminance to the target") {
+  // Three grey pixels of luminance 0.1 and a light far above the ceiling: the
+  // light counts as 6, so 3 * 0.1 s + 6 = 4 * 2 gives s = 20 / 3.
+  Image image(4, 1, 3, 0.1f);
+  for (int c = 0; c < 3; ++c) image.at(3, 0, c) = 100.0f;
+  CHECK(tmo::exposureForMean(image, 2.0) == doctest::Approx(20.0 / 3.0).epsilon(1e-6));
+  // Rec. 709 weights: a pure green pixel of 1 has luminance 0.7152.
+  Image green(1, 1, 3, 0.0f);
+  green.at(0, 0, 1) = 1.0f;
+  CHECK(tmo::exposureForMean(green, 0.3576) == doctest::Approx(0.5).epsilon(1e-6));
+  // NaN, Inf and negatives are dark; a black frame keeps its exposure; limits hold.
+  Image odd(3, 1, 3, 0.2f);
+  odd.at(1, 0, 0) = std::nanf("");
+  odd.at(2, 0, 1) = -5.0f;
+  odd.at(2, 0, 0) = std::numeric_limits<float>::infinity();
+  const double s = tmo::exposureForMean(odd, 0.1);
+  CHECK(std::isfinite(s));
+  CHECK(s * 0.2 / 3.0 == doctest::Approx(0.1).epsilon(1e-6));  // one valid pixel of three
+  CHECK(tmo::exposureForMean(Image(2, 2, 3, 0.0f), 0.3) == 1.0);
+  CHECK(tmo::exposureForMean(Image(2, 2, 3, 1e-6f), 0.3) == 64.0);
+  CHECK(tmo::exposureForMean(Image(2, 2, 3, 5.0f), 0.3, 6.0, 4.0) == 0.25);
+  CHECK_THROWS_AS(tmo::exposureForMean(Image(2, 2, 1, 1.0f), 0.3), std::invalid_argument);
 }

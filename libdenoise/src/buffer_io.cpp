@@ -272,6 +272,31 @@ std::vector<std::string> availableBuffers(const std::string& path, const ReadOpt
   return names;
 }
 
+namespace {
+
+// The sample count Cycles writes as "cycles.<view layer>.samples": the colour's
+// view layer first, else the only such attribute. 0 when absent or unreadable.
+int recordedSamples(const OIIO::ImageSpec& spec, const std::string& layerPrefix) {
+  auto parse = [](const OIIO::ParamValue& p) {
+    const std::string text = p.get_string();
+    char* end = nullptr;
+    const long n = std::strtol(text.c_str(), &end, 10);
+    return end != text.c_str() && *end == '\0' && n > 0 && n < (1L << 30) ? int(n) : 0;
+  };
+  std::vector<const OIIO::ParamValue*> found;
+  for (const auto& p : spec.extra_attribs) {
+    const std::string name = p.name().string();
+    if (name.rfind("cycles.", 0) != 0 || name.size() < 16 ||
+        name.compare(name.size() - 8, 8, ".samples") != 0)
+      continue;
+    if (!layerPrefix.empty() && name == "cycles." + layerPrefix + "samples") return parse(p);
+    found.push_back(&p);
+  }
+  return found.size() == 1 ? parse(*found.front()) : 0;
+}
+
+}  // namespace
+
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
   auto in = openInput(path);
   ChannelTable table = scanChannels(*in, path);
@@ -294,6 +319,7 @@ FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
   }
   for (const auto& name : options.only)
     if (!frame.has(name)) fail(path, "has no '" + name + "' buffer");
+  frame.samplesPerPixel = recordedSamples(table.specs[0], layerPrefixOf(frame));
   return frame;
 }
 

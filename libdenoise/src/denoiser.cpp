@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "dn/highlights.h"
 #include "dn/mean_match.h"
 #include "dn/model_inputs.h"
 #include "dn/tiler.h"
@@ -12,12 +13,46 @@ namespace dn {
 
 namespace {
 
-int64_t defaultSkip(const ModelInfo& info) {
-  auto it = info.notes.find("default_skip");
-  return it == info.notes.end() ? 0 : std::stoll(it->second);
+int64_t noteOr(const ModelInfo& info, const std::string& key, int64_t fallback) {
+  auto it = info.notes.find(key);
+  return it == info.notes.end() ? fallback : std::stoll(it->second);
+}
+
+// Forward noise at a step in image units, sqrt((1 - alpha_bar) / alpha_bar).
+double noiseLevel(const NoiseSchedule& schedule, int64_t step) {
+  const double ab = schedule.alphaBar(step);
+  return std::sqrt((1.0 - ab) / ab);
+}
+
+double exposureFor(const ModelInfo& info, const Image& color, double requested) {
+  if (requested > 0.0) return requested;
+  auto it = info.notes.find("exposure_target");
+  return it == info.notes.end() ? 1.0 : tonemap::exposureForMean(color, std::stod(it->second));
 }
 
 }  // namespace
+
+SamplingPlan planSampling(const ModelInfo& info, const NoiseSchedule& schedule,
+                          const DenoiseOptions& options, int fileSpp) {
+  SamplingPlan plan;
+  const int64_t defaultSpp = noteOr(info, "default_spp", 0);
+  plan.spp = options.spp > 0 ? options.spp : fileSpp;
+  if (defaultSpp > 0 && plan.spp > 0) plan.noiseScale = std::sqrt(double(defaultSpp) / plan.spp);
+  if (options.skip >= 0) {
+    plan.skip = options.skip;
+  } else {
+    // The model's default start, as a noise level on its own sampling schedule,
+    // carried over to the schedule in use and scaled to the input's noise.
+    const NoiseSchedule defaults = info.samplingSchedule();
+    const double level =
+        noiseLevel(defaults, startStep(defaults, noteOr(info, "default_skip", 0))) *
+        plan.noiseScale;
+    plan.skip = maxSkipForNoise(schedule, level * (1.0 - 1e-9));  // exact default: its own skip
+  }
+  plan.meanMatchSigma = options.meanMatchSigma >= 0 ? options.meanMatchSigma
+                                                    : kDefaultMeanMatchSigma * plan.noiseScale;
+  return plan;
+}
 
 torch::Tensor imageToTensor(const Image& image) {
   return imageRegionToTensor(image, 0, 0, image.height, image.width);
@@ -73,19 +108,21 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
 
   // The radiance in model space is full-frame (the sampler starts from it); the
   // aux inputs, ten times as many channels, are normalized per tile on demand.
-  const torch::Tensor cond =
-      modelSpaceFromTonemapped(tonemapRadiance(imageToTensor(frame.get("color")), curve));
+  const double exposure = exposureFor(mi, frame.get("color"), options.exposure);
+  const torch::Tensor cond = modelSpaceFromTonemapped(
+      tonemapRadiance(imageToTensor(frame.get("color")) * exposure, curve));
   auto auxOf = [&](const TileRect& r) {
-    return mi.input_buffers.empty()
-               ? torch::Tensor()
-               : normalizedAuxRegion(frame, mi.input_buffers, curve, r.y0, r.x0, r.height, r.width);
+    return mi.input_buffers.empty() ? torch::Tensor()
+                                    : normalizedAuxRegion(frame, mi.input_buffers, curve, r.y0,
+                                                          r.x0, r.height, r.width, exposure);
   };
 
   const NoiseSchedule schedule = options.respacing.empty()
                                      ? mi.samplingSchedule()
                                      : respace(mi.trainingSchedule(), options.respacing);
   const bool regression = mi.objective == Objective::Regression;
-  const int64_t skip = options.skip >= 0 ? options.skip : defaultSkip(mi);
+  const SamplingPlan plan = planSampling(mi, schedule, options, frame.samplesPerPixel);
+  const int64_t skip = plan.skip;
   startStep(schedule, skip);  // validates skip against the step count
   const int64_t steps = regression ? 1 : schedule.size() - skip;
   // A regression model is deterministic: more samples would be identical copies.
@@ -127,7 +164,8 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
 
   torch::Tensor sum, sumSquares;
   for (int k = 0; k < samples; ++k) {
-    torch::Tensor hdr = inverseTonemapRadiance(tonemappedFromModelSpace(sampleOnce(k)), curve);
+    torch::Tensor hdr =
+        inverseTonemapRadiance(tonemappedFromModelSpace(sampleOnce(k)), curve) / exposure;
     if (samples > 1) sumSquares = k == 0 ? hdr * hdr : sumSquares + hdr * hdr;
     sum = k == 0 ? hdr : sum + hdr;  // hdr is a fresh tensor every sample
   }
@@ -135,12 +173,16 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   DenoiseResult result;
   const double n = samples;
   torch::Tensor mean = sum / n;
-  result.color = tensorToImage(
-      matchLocalMean(mean, imageToTensor(frame.get("color")), options.meanMatchSigma));
+  const torch::Tensor render = imageToTensor(frame.get("color"));
+  const double rangeMax = tonemap::kHdrMax / exposure;  // the model's range in input units
+  result.color = tensorToImage(restoreHighlights(
+      matchLocalMean(mean, render, plan.meanMatchSigma, 4.0, rangeMax), render, rangeMax));
   if (samples > 1) {
     torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
     result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
   }
+  result.plan = plan;
+  result.exposure = exposure;
   result.steps = steps;
   result.tileSize = std::min<int64_t>(tile, std::max(frame.width, frame.height));
   result.tileCount = tiler.tiles().size();

@@ -27,6 +27,8 @@ constexpr double kFeatureNormEps = 1e-6;
 // the affinities get no gradient. With this bound a pixel keeps itself only by
 // making its neighbours' features differ (texture and geometry edges).
 constexpr double kMaxCentreWeight = 4.0;
+// Written into model files so a change of parametrisation is detected on load.
+constexpr const char* kCentreWeightParametrisation = "sigmoid4";
 
 constexpr double kLeakySlope = 0.1;
 
@@ -310,7 +312,8 @@ std::string kernelModelInfoToText(const KernelModelInfo& info) {
       << "kernel.feature_dims=" << net.feature_dims << "\n"
       << "kernel.dilations=" << joinInts(net.dilations) << "\n"
       << "kernel.kernel_size=" << net.kernel_size << "\n"
-      << "kernel.demodulate=" << (net.demodulate ? 1 : 0) << "\n";
+      << "kernel.demodulate=" << (net.demodulate ? 1 : 0) << "\n"
+      << "kernel.centre_weight=" << kCentreWeightParametrisation << "\n";
   for (const auto& [key, value] : info.notes) {
     if (value.find('\n') != std::string::npos || key.find('=') != std::string::npos ||
         key.find('\n') != std::string::npos)
@@ -331,11 +334,25 @@ KernelModelInfo kernelModelInfoFromText(const std::string& text, const std::stri
   net.dilations = metadata.integers("kernel.dilations");
   net.kernel_size = metadata.integer("kernel.kernel_size");
   // Models written before demodulation existed filter the radiance itself.
-  if (metadata.values.count("kernel.demodulate")) {
+  const bool has_demodulate = metadata.values.count("kernel.demodulate") > 0;
+  if (has_demodulate) {
     const int64_t demodulate = metadata.integer("kernel.demodulate");
     if (demodulate != 0 && demodulate != 1)
       metadata.fail("metadata 'kernel.demodulate' is not 0 or 1");
     net.demodulate = demodulate == 1;
+  }
+  // The centre weight was once softplus(raw) / ln 2, unbounded; the same weights
+  // read through the bounded sigmoid give a different filter. Files that name
+  // their parametrisation, or that have the later demodulate key, are bounded;
+  // older files are ambiguous and refused rather than silently misread.
+  if (metadata.values.count("kernel.centre_weight")) {
+    if (metadata.text("kernel.centre_weight") != kCentreWeightParametrisation)
+      metadata.fail("metadata 'kernel.centre_weight' is '" + metadata.text("kernel.centre_weight") +
+                    "'; this build reads only '" + kCentreWeightParametrisation + "'");
+  } else if (!has_demodulate) {
+    metadata.fail(
+        "written before the bounded centre weight (no 'kernel.centre_weight' key); "
+        "this build would misread it, retrain the model with dncleanse train");
   }
   try {
     info.task = kernelTaskFromName(metadata.text("task"));

@@ -46,13 +46,15 @@ torch::Tensor gaussianBlur(const torch::Tensor& image, double sigma) {
 }
 
 torch::Tensor matchLocalMean(const torch::Tensor& denoised, const torch::Tensor& render,
-                             double sigma, double maxRatio) {
+                             double sigma, double maxRatio, double rangeMax) {
   if (sigma <= 0.0) return denoised;
   torch::NoGradGuard noGrad;
-  constexpr double kEpsilon = 1e-3;  // dark regions: ratios of near-zero means are noise
-  const auto target = torch::nan_to_num(render, 0.0, 0.0, 0.0).clamp(0.0, tonemap::kHdrMax);
-  auto ratio = (gaussianBlur(target, sigma) + kEpsilon) /
-               (gaussianBlur(denoised.clamp_min(0.0), sigma) + kEpsilon);
+  // Dark regions: ratios of near-zero means are noise. Relative to the range, so
+  // the correction does not depend on the exposure of the render.
+  const double epsilon = 1e-3 * rangeMax / tonemap::kHdrMax;
+  const auto target = torch::nan_to_num(render, 0.0, 0.0, 0.0).clamp(0.0, rangeMax);
+  auto ratio = (gaussianBlur(target, sigma) + epsilon) /
+               (gaussianBlur(denoised.clamp_min(0.0), sigma) + epsilon);
   return denoised * ratio.clamp(1.0 / maxRatio, maxRatio);
 }
 

@@ -120,10 +120,15 @@ torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, in
 
 torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,
                                   const std::vector<std::string>& buffers, tonemap::Curve curve,
-                                  int64_t y0, int64_t x0, int64_t height, int64_t width) {
+                                  int64_t y0, int64_t x0, int64_t height, int64_t width,
+                                  double exposure) {
   std::vector<torch::Tensor> parts;
-  for (const auto& name : buffers)
-    parts.push_back(imageRegionToTensor(frame.get(name), y0, x0, height, width));
+  for (const auto& name : buffers) {
+    auto part = imageRegionToTensor(frame.get(name), y0, x0, height, width);
+    if (exposure != 1.0 && kindOf(name) == AuxKind::Radiance) part.mul_(exposure);
+    if (exposure != 1.0 && kindOf(name) == AuxKind::Variance) part.mul_(exposure * exposure);
+    parts.push_back(part);
+  }
   return normalizeAux(torch::cat(parts, 1), buffers, curve);
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 namespace dn::tonemap {
 
@@ -86,6 +87,31 @@ Curve curveFromName(const std::string& name) {
   if (name == "srgb") return Curve::Srgb;
   throw std::invalid_argument("unknown tonemap curve '" + name +
                               "' (expected linear, gamma, log, reinhard or srgb)");
+}
+
+double exposureForMean(const Image& image, double target, double ceiling, double maxScale) {
+  if (image.channels < 3) throw std::invalid_argument("exposureForMean needs 3 channels");
+  std::vector<float> luminance;
+  luminance.reserve(image.pixelCount());
+  for (std::size_t i = 0; i < image.pixels.size(); i += std::size_t(image.channels)) {
+    const float* p = &image.pixels[i];
+    const float y = 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2];
+    luminance.push_back(std::isfinite(y) && y > 0.0f ? y : 0.0f);
+  }
+  auto meanAt = [&](double scale) {
+    double sum = 0.0;
+    for (float y : luminance) sum += std::min(scale * y, ceiling);
+    return luminance.empty() ? 0.0 : sum / double(luminance.size());
+  };
+  // The mean grows with the scale: bisect in log space.
+  double lo = 1.0 / maxScale, hi = maxScale;
+  if (meanAt(hi) <= target) return meanAt(hi) > 0.0 ? hi : 1.0;
+  if (meanAt(lo) >= target) return lo;
+  for (int i = 0; i < 50; ++i) {
+    const double mid = std::sqrt(lo * hi);
+    (meanAt(mid) < target ? lo : hi) = mid;
+  }
+  return std::sqrt(lo * hi);
 }
 
 const char* curveName(Curve curve) {

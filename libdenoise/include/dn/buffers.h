@@ -39,6 +39,9 @@ struct FrameBuffers {
   // Where each buffer came from: the file's channel names, e.g.
   // {"ViewLayer.Combined.R", ...}; empty for synthesized buffers.
   std::map<std::string, std::vector<std::string>> sourceChannels;
+  // Samples per pixel the renderer recorded in the file (Cycles writes
+  // "cycles.<view layer>.samples"); 0 when unknown.
+  int samplesPerPixel = 0;
 
   bool has(const std::string& name) const { return buffers.count(name) != 0; }
   const Image& get(const std::string& name) const;  // throws std::out_of_range naming the buffer

@@ -19,24 +19,51 @@ namespace dn {
 // The largest tile chosen when DenoiseOptions::tile is 0 (see denoiser.cpp).
 constexpr int64_t kMaxDefaultTile = 256;
 
+// Local mean matching radius of the model defaults, in pixels (dn/mean_match.h).
+constexpr double kDefaultMeanMatchSigma = 2.0;
+
 struct DenoiseOptions {
   std::string respacing;  // "" = the model's default (27 steps); "10" = 10 evenly spaced steps
-  int64_t skip = -1;      // noisiest steps to skip; -1 = the model's default
+  int64_t skip = -1;      // noisiest steps to skip; -1 = from the model's default (see below)
   SamplerKind sampler = SamplerKind::Ddpm;
-  double eta = 0.0;             // DDIM only
-  uint64_t seed = 0;            // same seed, same output
-  int samples = 1;              // K > 1: mean of K samples and their standard deviation
-  double meanMatchSigma = 2.0;  // local mean matching radius (dn/mean_match.h); 0 = off
-  int64_t tile = 0;             // network tile size; 0 = derived from maxMemoryBytes, at most 256
-  int64_t overlap = 32;         // tile overlap in pixels
+  double eta = 0.0;              // DDIM only
+  uint64_t seed = 0;             // same seed, same output
+  int samples = 1;               // K > 1: mean of K samples and their standard deviation
+  double meanMatchSigma = -1.0;  // local mean matching radius; 0 = off, -1 = from the default
+  // Samples per pixel of the input; 0 = unknown (FrameBuffers::samplesPerPixel
+  // is used). Defaults are scaled from the model's default_spp to this count.
+  int spp = 0;
+  // Radiance scale applied before the model and undone after; 0 = autoexposure
+  // to the model's exposure_target (none: 1). Dark renders are brightened into
+  // the range the model was trained on, where the log curve resolves them.
+  double exposure = 0.0;
+  int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes, at most 256
+  int64_t overlap = 32;  // tile overlap in pixels
   double maxMemoryBytes = 3.0e9;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };
 
+// Skip and mean matching radius for one input. A model's defaults are tuned for
+// renders at its default_spp; Monte Carlo noise falls as 1/sqrt(spp), so a
+// render with more samples starts where the forward noise level matches its
+// own (a later step) and trusts its local means at a proportionally smaller
+// radius. Explicit options win; unknown spp or a model without default_spp
+// keeps the defaults as they are.
+struct SamplingPlan {
+  int64_t skip = 0;
+  double meanMatchSigma = kDefaultMeanMatchSigma;
+  int spp = 0;            // the count used, 0 = unknown
+  double noiseScale = 1;  // sqrt(default_spp / spp)
+};
+SamplingPlan planSampling(const ModelInfo& info, const NoiseSchedule& schedule,
+                          const DenoiseOptions& options, int fileSpp);
+
 struct DenoiseResult {
-  Image color;        // linear HDR, 3 channels
-  Image uncertainty;  // per-pixel standard deviation over samples (samples > 1), 1 channel
-  int64_t steps = 0;  // network evaluations per sample
+  Image color;          // linear HDR, 3 channels
+  Image uncertainty;    // per-pixel standard deviation over samples (samples > 1), 1 channel
+  SamplingPlan plan;    // skip and mean matching radius used
+  double exposure = 1;  // radiance scale used
+  int64_t steps = 0;    // network evaluations per sample
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
 };

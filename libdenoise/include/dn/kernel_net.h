@@ -65,7 +65,7 @@ torch::Tensor affinityFilter(const torch::Tensor& image, const torch::Tensor& fe
 
 // Per-iteration kernel parameters decoded from the network's guide maps:
 // unit-length features, bandwidth in (0, 20) (1 when the raw output is 0),
-// centre weight softplus(raw) / ln 2 (1 when the raw output is 0).
+// centre weight 4 sigmoid(raw - ln 3) in (0, 4) (1 when the raw output is 0).
 struct KernelGuide {
   torch::Tensor features, bandwidth, centre;
 };

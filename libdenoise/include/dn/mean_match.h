@@ -9,6 +9,8 @@
 
 #include <torch/torch.h>
 
+#include "dn/tonemap.h"
+
 namespace dn {
 
 // Per-channel Gaussian blur (B,C,H,W) with standard deviation `sigma` pixels,
@@ -17,9 +19,10 @@ torch::Tensor gaussianBlur(const torch::Tensor& image, double sigma);
 
 // `denoised` (B,C,H,W, linear HDR) rescaled per channel by
 // blur(render) / blur(denoised), the ratio clamped to [1/maxRatio, maxRatio].
-// The render is clamped to the model's radiance range [0, kHdrMax] first, as the
+// The render is clamped to the model's radiance range [0, rangeMax] first, as the
 // network saw it; NaN/Inf count as 0. sigma <= 0 returns `denoised` unchanged.
 torch::Tensor matchLocalMean(const torch::Tensor& denoised, const torch::Tensor& render,
-                             double sigma, double maxRatio = 4.0);
+                             double sigma, double maxRatio = 4.0,
+                             double rangeMax = tonemap::kHdrMax);
 
 }  // namespace dn

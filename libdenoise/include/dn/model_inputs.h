@@ -36,8 +36,11 @@ torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, in
 // normalizing the whole frame and cropping, but a frame's worth of aux channels
 // (35 floats per pixel) never exists at once. Throws std::out_of_range naming a
 // buffer the frame lacks.
+// `exposure` scales the radiance buffers (variances by its square) first, as
+// the colour is scaled by autoexposure.
 torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,
                                   const std::vector<std::string>& buffers, tonemap::Curve curve,
-                                  int64_t y0, int64_t x0, int64_t height, int64_t width);
+                                  int64_t y0, int64_t x0, int64_t height, int64_t width,
+                                  double exposure = 1.0);
 
 }  // namespace dn

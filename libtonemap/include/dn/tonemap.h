@@ -33,6 +33,13 @@ void apply(Curve curve, Image& image);
 void applyInverse(Curve curve, Image& image);
 void clamp(Image& image, float lo, float hi);
 
+// Autoexposure: the scale s with mean(min(s * luminance, ceiling)) = target over
+// the first three channels (Rec. 709 luminance; NaN, Inf and negatives count as
+// 0), so lights and fireflies above the ceiling count once. Clamped to
+// [1 / maxScale, maxScale]; 1 for an image with no light.
+double exposureForMean(const Image& image, double target, double ceiling = kHdrMax,
+                       double maxScale = 64.0);
+
 // "gamma", "log", "reinhard", "srgb", "linear"; throws std::invalid_argument.
 Curve curveFromName(const std::string& name);
 const char* curveName(Curve curve);

@@ -1,0 +1,22 @@
+#include "dn/highlights.h"
+
+namespace dn {
+
+torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tensor& render,
+                                double rangeMax) {
+  torch::NoGradGuard noGrad;
+  namespace F = torch::nn::functional;
+  const auto clean = torch::nan_to_num(render, 0.0, 0.0, 0.0);
+  const auto peak = std::get<0>(clean.max(1, true));
+  auto pool = [](const torch::Tensor& x) {
+    return F::max_pool2d(x, F::MaxPool2dFuncOptions(3).stride(1).padding(1));
+  };
+  // Erosion (min over 3x3) rejects isolated fireflies; the dilation after it
+  // brings back the highlight's border pixels.
+  const auto bright = -pool(-peak) >= rangeMax;
+  const auto keep = pool(bright.to(torch::kFloat)) > 0.5;
+  if (!keep.any().item<bool>()) return denoised;
+  return torch::where(keep, torch::maximum(clean, denoised), denoised);
+}
+
+}  // namespace dn
