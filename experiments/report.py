@@ -31,9 +31,9 @@ METRICS = [("l1", "L1", 4), ("psnr", "PSNR (dB)", 2), ("ssim", "SSIM", 4), ("fli
            ("hdrflip", "HDR-FLIP", 4)]
 SHORT = {"noisy": "Noisy", "oidn": "OIDN", "oidn_high": "OIDN high", "isik": "Isik",
          "regression": "Regression", "base": "Base prior", "ours": "Ours",
-         "ours_nomatch": "Ours (no mean matching)", "ours_best": "Ours (tuned)",
+         "ours_nomatch": "Ours (no mean matching)", "ours_fixed": "Ours (4-spp defaults)", "ours_best": "Ours (tuned)",
          "ours_samples": "Ours (K samples)"}
-OURS = ("ours", "ours_nomatch", "ours_best", "ours_samples")
+OURS = ("ours", "ours_nomatch", "ours_fixed", "ours_best", "ours_samples")
 FIGURE_CROP = 128
 FIGURE_MIN_WIDTH = 192
 # Luminance bands of the reference (linear, exposure-scaled radiance) for "where" analysis.

@@ -6,6 +6,7 @@ no output written)."""
 import argparse
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -141,6 +142,32 @@ def main():
     expect_error("dntrain defaults: skip beyond the steps",
                  [dntrain, "defaults", "--model", model, "--respacing", "6", "--default-skip", "6",
                   "--out", p("x0.dnm")], "skip_steps", p("x0.dnm"))
+
+    # Sample-count adaptation and autoexposure, stored as model defaults.
+    out = run([dntrain, "defaults", "--model", p("tuned.dnm"), "--default-spp", "4",
+               "--exposure-target", "0.5", "--out", p("adaptive.dnm")])
+    check("dntrain defaults --default-spp --exposure-target: exit 0", out.returncode == 0, out.stderr)
+    run([dndenoise, "--model", p("adaptive.dnm"), "--threads", "1", "--spp", "4", "--exposure", "1",
+         frame, "-o", p("anchor.exr")])
+    check("at its default spp and without exposure the adaptive model gives the tuned output",
+          np.array_equal(read_rgb(p("anchor.exr"), "ViewLayer.Denoised"), denoised))
+    out = run([dndenoise, "--model", p("adaptive.dnm"), "--threads", "1", "--spp", "64", "-v",
+               frame, "-o", p("spp64.exr")])
+    skip = re.search(r"64 spp, exposure x([0-9.e+-]+), skip (\d+)", out.stderr)
+    check("--spp 64: a later start than the 4-spp default, autoexposure applied, finite output",
+          out.returncode == 0 and skip and int(skip.group(2)) > 2 and float(skip.group(1)) != 1.0
+          and np.isfinite(read_rgb(p("spp64.exr"), "ViewLayer.Denoised")).all(), out.stderr)
+    expect_error("dndenoise --spp 0", [dndenoise, "--model", model, "--spp", "0", frame, "-o", p("x1.exr")],
+                 "--spp", p("x1.exr"))
+    expect_error("dndenoise --exposure -2", [dndenoise, "--model", model, "--exposure", "-2", frame,
+                                             "-o", p("x2.exr")], "--exposure", p("x2.exr"))
+    out = run([dntrain, "prior", "--model", p("adaptive.dnm"), "--out", p("prior.dnm")])
+    check("dntrain prior: exit 0", out.returncode == 0, out.stderr)
+    out = run([dndenoise, "--model", p("prior.dnm"), "--threads", "1", frame, "-o", p("prior.exr")])
+    check("the extracted prior denoises", out.returncode == 0
+          and np.isfinite(read_rgb(p("prior.exr"), "ViewLayer.Denoised")).all(), out.stderr)
+    expect_error("dntrain prior of a prior", [dntrain, "prior", "--model", p("prior.dnm"), "--out",
+                                              p("x3.dnm")], "prior.dnm", p("x3.dnm"))
 
     out = run(base_cmd + ["--rgb-only", frame, "-o", p("rgb.exr")])
     check("--rgb-only writes R,G,B only", out.returncode == 0 and set(channels_of(p("rgb.exr"))) == {"R", "G", "B"})
