@@ -283,13 +283,14 @@ int recordedSamples(const OIIO::ImageSpec& spec, const std::string& layerPrefix)
     const long n = std::strtol(text.c_str(), &end, 10);
     return end != text.c_str() && *end == '\0' && n > 0 && n < (1L << 30) ? int(n) : 0;
   };
+  const std::string prefix = "cycles.", suffix = ".samples";
   std::vector<const OIIO::ParamValue*> found;
   for (const auto& p : spec.extra_attribs) {
     const std::string name = p.name().string();
-    if (name.rfind("cycles.", 0) != 0 || name.size() < 16 ||
-        name.compare(name.size() - 8, 8, ".samples") != 0)
+    if (name.size() <= prefix.size() + suffix.size() || name.rfind(prefix, 0) != 0 ||
+        name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0)
       continue;
-    if (!layerPrefix.empty() && name == "cycles." + layerPrefix + "samples") return parse(p);
+    if (!layerPrefix.empty() && name == prefix + layerPrefix + "samples") return parse(p);
     found.push_back(&p);
   }
   return found.size() == 1 ? parse(*found.front()) : 0;
