@@ -1,6 +1,7 @@
 // The inference pipeline (dn/denoiser.h): sampling defaults adapted to the
 // input's sample count, and autoexposure.
 #include "doctest_torch.h"
+#include "tiny_models.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 
@@ -14,12 +15,7 @@ namespace {
 
 ModelInfo tinyInfo() {
   ModelInfo info;
-  info.base.base_channels = 8;
-  info.base.channel_mults = {1, 2};
-  info.base.res_blocks = 1;
-  info.base.attention_levels = {1};
-  info.base.head_channels = 8;
-  info.base.norm_groups = 4;
+  info.base = tinyUNetConfig();
   info.has_control = true;
   info.control = ControlConfig{6, 3, 8, 2};  // albedo + diffuse_direct
   info.input_buffers = {"albedo", "diffuse_direct"};
@@ -95,14 +91,9 @@ TEST_CASE("autoexposure: a brighter render gives the same result, brighter") {
   ModelInfo info = tinyInfo();
   info.notes["exposure_target"] = "0.3";
   LoadedModel loaded{info, buildDenoiser(info)};
-  {
-    // Random weights everywhere, also in the zero-initialised control outputs,
-    // so the aux radiance scaling is exercised too.
-    torch::NoGradGuard noGrad;
-    auto generator = at::detail::createCPUGenerator(11);
-    for (auto& p : loaded.model->parameters())
-      p.copy_(torch::randn(p.sizes(), generator, torch::kFloat) * 0.05);
-  }
+  // Random weights everywhere, also in the zero-initialised control outputs,
+  // so the aux radiance scaling is exercised too.
+  randomize(*loaded.model, 11, 0.05);
   const Denoiser denoiser(loaded);
 
   FrameBuffers dim, bright;

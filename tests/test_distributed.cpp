@@ -1,4 +1,5 @@
 #include "doctest_torch.h"
+#include "tiny_models.h"
 
 #include <netinet/in.h>
 #include <signal.h>
@@ -123,12 +124,7 @@ constexpr int kTrainerSteps = 2;
 // ranks and a single process see exactly the same loss on the same images.
 ModelInfo tinyRegressionInfo() {
   ModelInfo info;
-  info.base.base_channels = 8;
-  info.base.channel_mults = {1, 2};
-  info.base.res_blocks = 1;
-  info.base.attention_levels = {1};
-  info.base.head_channels = 8;
-  info.base.norm_groups = 4;
+  info.base = tinyUNetConfig();
   info.has_control = false;
   info.objective = Objective::Regression;
   info.prediction = Prediction::X0;

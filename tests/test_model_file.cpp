@@ -1,6 +1,7 @@
 // Model files and training checkpoints: round trips, every corruption path, and
 // exact resumption of training.
 #include "doctest_torch.h"
+#include "tiny_models.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 
@@ -21,12 +22,7 @@ namespace {
 
 ModelInfo tinyInfo(bool with_control) {
   ModelInfo info;
-  info.base.base_channels = 8;
-  info.base.channel_mults = {1, 2};
-  info.base.res_blocks = 1;
-  info.base.attention_levels = {1};
-  info.base.head_channels = 8;
-  info.base.norm_groups = 4;
+  info.base = tinyUNetConfig();
   info.has_control = with_control;
   info.control = ControlConfig{4, 3, 8, 2};
   info.input_buffers = {"albedo", "depth"};
@@ -34,13 +30,6 @@ ModelInfo tinyInfo(bool with_control) {
   info.respacing = "super27";
   info.notes["spp"] = "4";
   return info;
-}
-
-void randomize(torch::nn::Module& module, uint64_t seed) {
-  torch::NoGradGuard no_grad;
-  auto generator = at::detail::createCPUGenerator(seed);
-  for (auto& parameter : module.parameters())
-    parameter.copy_(torch::randn(parameter.sizes(), generator, torch::kFloat) * 0.1);
 }
 
 fs::path tempDir() {
@@ -97,7 +86,7 @@ TEST_CASE("model file round trip keeps metadata and weights") {
   const auto path = dir / "model.dnm";
   auto info = tinyInfo(true);
   auto model = buildDenoiser(info);
-  randomize(*model, 1);
+  randomize(*model, 1, 0.1);
   saveModelFile(path.string(), info, *model);
   auto loaded = loadModelFile(path.string());
   CHECK(modelInfoToText(loaded.info) == modelInfoToText(info));
@@ -188,7 +177,7 @@ TEST_CASE("wrong, truncated and corrupt model files throw ModelError with one cl
 TEST_CASE("a training step on a controlled model changes only the Control Module") {
   auto info = tinyInfo(true);
   auto model = buildDenoiser(info);
-  randomize(*model, 2);
+  randomize(*model, 2, 0.1);
   auto controlled = std::dynamic_pointer_cast<ControlledDenoiser>(model);
   REQUIRE(controlled);
   auto base_before = snapshot(*controlled->base());
@@ -210,7 +199,7 @@ TEST_CASE("a training step on a controlled model changes only the Control Module
 TEST_CASE("training steps lower the diffusion loss on a fixed batch") {
   auto info = tinyInfo(true);
   auto model = buildDenoiser(info);
-  randomize(*model, 6);
+  randomize(*model, 6, 0.1);
   TrainerOptions options;
   options.learning_rate = 2e-3;
   Trainer trainer(model, info, options);
@@ -229,7 +218,7 @@ TEST_CASE("regression ablation: L1 on a direct prediction, saved and reloaded as
   info.objective = Objective::Regression;
   info.prediction = Prediction::X0;
   auto model = buildDenoiser(info);
-  randomize(*model, 8);
+  randomize(*model, 8, 0.1);
   const auto batch = tinyBatch(22, 4);
   // The loss is the L1 of one network pass on the noisy image, in model space.
   {
@@ -280,7 +269,7 @@ TEST_CASE("a checkpoint resumes training exactly") {
   TrainerOptions options;
   options.seed = 3;
   auto model_a = buildDenoiser(info);
-  randomize(*model_a, 4);
+  randomize(*model_a, 4, 0.1);
   Trainer a(model_a, info, options);
   a.step(tinyBatch(10, 4));
   a.step(tinyBatch(11, 4));
@@ -318,7 +307,7 @@ TEST_CASE("the EMA model file holds the exponential average of the weights") {
   const auto dir = tempDir();
   auto info = tinyInfo(false);
   auto model = buildDenoiser(info);
-  randomize(*model, 5);
+  randomize(*model, 5, 0.1);
   auto before = model->named_parameters().values();
   std::vector<torch::Tensor> initial;
   for (auto& p : before) initial.push_back(p.detach().clone());

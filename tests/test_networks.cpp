@@ -1,6 +1,7 @@
 // Network blocks, the UNet prior and the Control Module: shapes, closed forms,
 // and the two ControlNet invariants (identity at initialisation, frozen base).
 #include "doctest_torch.h"
+#include "tiny_models.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 
@@ -13,25 +14,6 @@
 using namespace dn;
 
 namespace {
-
-UNetConfig tinyConfig() {
-  UNetConfig config;
-  config.base_channels = 8;
-  config.channel_mults = {1, 2};
-  config.res_blocks = 1;
-  config.attention_levels = {1};
-  config.head_channels = 8;
-  config.norm_groups = 4;
-  return config;
-}
-
-// Zero-initialised layers would make every output 0; random weights make the checks bite.
-void randomize(torch::nn::Module& module, uint64_t seed) {
-  torch::NoGradGuard no_grad;
-  auto generator = at::detail::createCPUGenerator(seed);
-  for (auto& parameter : module.parameters())
-    parameter.copy_(torch::randn(parameter.sizes(), generator, torch::kFloat) * 0.2);
-}
 
 struct Inputs {
   torch::Tensor z, t, cond, aux;
@@ -87,12 +69,12 @@ TEST_CASE("attention block equals a direct softmax(QK^T / sqrt(d)) V") {
   torch::NoGradGuard no_grad;
   torch::manual_seed(0);
   nn::AttentionBlock block(8, 4, 2);
-  randomize(*block, 2);
+  randomize(*block, 2, 0.2);
   auto x = torch::randn({1, 8, 3, 5});
   CHECK(maxAbsDiff(block->forward(x), referenceAttention(block, x, 2)) < 1e-5);
   // 4100 tokens: the scores exceed one chunk, so queries are processed in pieces.
   nn::AttentionBlock single_head(8, 8, 2);
-  randomize(*single_head, 3);
+  randomize(*single_head, 3, 0.2);
   auto big = torch::randn({1, 8, 41, 100});
   CHECK(maxAbsDiff(single_head->forward(big), referenceAttention(single_head, big, 1)) < 1e-4);
 }
@@ -101,7 +83,7 @@ TEST_CASE("res block: identity-like at init, embedding changes the output") {
   nn::ResBlock block(8, 8, 16, 4);
   auto x = torch::randn({2, 8, 6, 6});
   CHECK(maxAbsDiff(block->forward(x, torch::randn({2, 16})), x) == 0.0);  // conv2 starts at zero
-  randomize(*block, 4);
+  randomize(*block, 4, 0.2);
   auto a = block->forward(x, torch::zeros({2, 16}));
   auto b = block->forward(x, torch::ones({2, 16}));
   CHECK(maxAbsDiff(a, b) > 1e-3);
@@ -110,9 +92,9 @@ TEST_CASE("res block: identity-like at init, embedding changes the output") {
 }
 
 TEST_CASE("UNet: shapes, any image size through predict, bad configs rejected") {
-  auto config = tinyConfig();
+  auto config = tinyUNetConfig();
   auto unet = std::make_shared<UNet>(config);
-  randomize(*unet, 3);
+  randomize(*unet, 3, 0.2);
   auto in = randomInputs(0);
   auto out = unet->predict(in.z, in.t, in.cond);
   CHECK(out.sizes() == in.z.sizes());
@@ -133,8 +115,8 @@ TEST_CASE("UNet: shapes, any image size through predict, bad configs rejected") 
 }
 
 TEST_CASE("at initialisation base + control gives exactly the base's output") {
-  auto base = std::make_shared<UNet>(tinyConfig());
-  randomize(*base, 5);
+  auto base = std::make_shared<UNet>(tinyUNetConfig());
+  randomize(*base, 5, 0.2);
   ControlConfig control_config;
   control_config.aux_channels = 7;
   control_config.hint_channels = 8;
@@ -146,13 +128,13 @@ TEST_CASE("at initialisation base + control gives exactly the base's output") {
   auto got = controlled.forward(in.z, in.t, in.cond, in.aux);
   CHECK(maxAbsDiff(got, expected) <= 1e-6);
   // The residual path is live: once the zero convs move, the output moves.
-  randomize(*controlled.control(), 6);
+  randomize(*controlled.control(), 6, 0.2);
   CHECK(maxAbsDiff(controlled.forward(in.z, in.t, in.cond, in.aux), expected) > 1e-4);
 }
 
 TEST_CASE("the control copy starts with the base encoder's weights") {
-  auto base = std::make_shared<UNet>(tinyConfig());
-  randomize(*base, 7);
+  auto base = std::make_shared<UNet>(tinyUNetConfig());
+  randomize(*base, 7, 0.2);
   ControlledDenoiser controlled(base, ControlConfig{4, 3, 8, 2});
   auto base_params = base->named_parameters();
   int64_t compared = 0;
@@ -168,8 +150,8 @@ TEST_CASE("the control copy starts with the base encoder's weights") {
 }
 
 TEST_CASE("after a backward pass only control parameters have gradients") {
-  auto base = std::make_shared<UNet>(tinyConfig());
-  randomize(*base, 8);
+  auto base = std::make_shared<UNet>(tinyUNetConfig());
+  randomize(*base, 8, 0.2);
   ControlledDenoiser controlled(base, ControlConfig{5, 3, 8, 2});
   controlled.train();
   CHECK_FALSE(base->is_training());  // the frozen base stays in eval mode
