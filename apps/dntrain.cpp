@@ -35,7 +35,7 @@ namespace {
 
 const char* kUsage =
     R"(usage: dntrain base    --data DIR [--photos DIR ...] --out base.dnm [options]
-       dntrain control --data DIR --base base.dnm --out model.dnm [options]
+       dntrain control --data DIR --base base.dnm|--init model.dnm --out model.dnm [options]
        dntrain regression --data DIR --base base.dnm --out reg.dnm [options]
        dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--default-spp N]
                         [--exposure-target Y] [--out FILE]
@@ -58,6 +58,8 @@ options:
   --data DIR            data set root (docs/dataset.md); training uses split 'train'
   --photos DIR          folder of photographs for the prior (repeatable)
   --base FILE           pretrained prior (control, regression)
+  --init FILE           control: continue training the Control Module of this model
+                        (its prior stays frozen; its sampling defaults are kept)
   --out FILE            model file written at the end (EMA weights)
   --aux LIST|default|none  control inputs (default: Denoising Data + diffuse/glossy/
                         transmission light passes); none = the radiance-only ablation
@@ -67,6 +69,10 @@ options:
   --lr X                learning rate (default 2e-4)  --halve-every N  halve lr every N steps
   --ema X               EMA decay (default 0.999)     --seed N  (default 1)
   --prediction eps|v    network output (default eps)
+  --max-timestep T      draw training timesteps below T only (default: all 1000);
+                        dndenoise never starts above its largest skip's step
+  --render-start P      control: fraction of samples noised from the render itself,
+                        at a step that covers its noise, as dndenoise starts (default 0)
   --base-channels N --res-blocks N   prior size (base only; default: the UNet defaults)
   --default-skip S      skip stored in the model for dndenoise (default: 18 control, 0 base)
   --respacing SPEC      defaults: steps stored in the model for dndenoise ("27", "super27")
@@ -94,13 +100,14 @@ std::atomic<bool> stopRequested{false};
 extern "C" void onSignal(int) { stopRequested = true; }
 
 struct Options {
-  std::string mode, data, base, out, log, checkpoint, model, respacing;
+  std::string mode, data, base, init, out, log, checkpoint, model, respacing;
   std::vector<std::string> photos;
   std::string aux = "default", prediction = "eps";
   std::vector<int> spp = {4, 16, 64};
   int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
           resBlocks = 0, defaultSkip = -1, defaultSpp = -1;
-  double exposureTarget = -1.0;
+  double exposureTarget = -1.0, renderStart = 0.0;
+  int64_t maxTimestep = 0;
   double lr = 2e-4, ema = 0.999, checkpointMinutes = 5;
   uint64_t seed = 1;
   int threads = 0;
@@ -140,6 +147,8 @@ Options parseArgs(int argc, char** argv) {
       o.photos.push_back(args.value("--photos"));
     else if (args.flag("--base"))
       o.base = args.value("--base");
+    else if (args.flag("--init"))
+      o.init = args.value("--init");
     else if (args.flag("--out"))
       o.out = args.value("--out");
     else if (args.flag("--aux"))
@@ -162,6 +171,10 @@ Options parseArgs(int argc, char** argv) {
       o.ema = args.doubleValue("--ema");
     else if (args.flag("--seed"))
       o.seed = static_cast<uint64_t>(args.intValue("--seed"));
+    else if (args.flag("--max-timestep"))
+      o.maxTimestep = args.intValue("--max-timestep");
+    else if (args.flag("--render-start"))
+      o.renderStart = args.doubleValue("--render-start");
     else if (args.flag("--prediction"))
       o.prediction = args.value("--prediction");
     else if (args.flag("--base-channels"))
@@ -225,8 +238,12 @@ Options parseArgs(int argc, char** argv) {
     throw cli::UsageError(
         "first argument must be base, control, regression, defaults or prior (see --help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
-  if (o.mode != "base" && (o.base.empty() || o.data.empty()))
-    throw cli::UsageError(o.mode + " needs --base and --data");
+  if (o.mode != "base" && (o.base.empty() == o.init.empty() || o.data.empty()))
+    throw cli::UsageError(o.mode + " needs --data and one of --base or --init");
+  if (!o.init.empty() && o.mode != "control")
+    throw cli::UsageError("--init continues a controlled model: control only");
+  if (o.maxTimestep < 0 || !(o.renderStart >= 0.0 && o.renderStart <= 1.0))
+    throw cli::UsageError("--max-timestep must be >= 0 and --render-start in [0, 1]");
   if (o.mode == "base" && o.data.empty() && o.photos.empty())
     throw cli::UsageError("base needs --data and/or --photos");
   if (o.batch < 1 || o.crop < 16 || o.steps < 1)
@@ -257,6 +274,14 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
     info.has_control = false;
     info.prediction = predictionFromName(o.prediction == "eps" ? "epsilon" : "v");
     info.notes["default_skip"] = std::to_string(std::max<int64_t>(0, o.defaultSkip));
+  } else if (!o.init.empty()) {
+    // Fine-tuning: the file's prior stays frozen, its Control Module trains on,
+    // and its sampling defaults are kept.
+    LoadedModel loaded = loadModelFile(o.init);
+    if (!loaded.info.has_control) throw IoError(o.init + ": has no Control Module to continue");
+    info = loaded.info;
+    model = loaded.model;
+    info.notes["init_model"] = fs::path(o.init).filename().string();
   } else {
     const LoadedModel base = loadModelFile(o.base);
     if (base.info.has_control) throw IoError(o.base + ": is a controlled model, not a base prior");
@@ -278,6 +303,8 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
   info.notes["train.batch"] = std::to_string(o.batch);
   info.notes["train.crop"] = std::to_string(o.crop);
   info.notes["train.seed"] = std::to_string(o.seed);
+  if (o.maxTimestep > 0) info.notes["train.max_timestep"] = std::to_string(o.maxTimestep);
+  if (o.renderStart > 0) info.notes["train.render_start"] = fmt::format("{}", o.renderStart);
   if (o.worldSize > 1) info.notes["train.world_size"] = std::to_string(o.worldSize);
   if (!model) model = buildDenoiser(info);
   return {info, model};
@@ -426,6 +453,8 @@ int run(const Options& o) {
   to.halve_every = o.halveEvery;
   to.ema_decay = o.ema;
   to.seed = o.seed;
+  to.diffusion.max_timestep = o.maxTimestep;
+  to.diffusion.render_start = o.renderStart;
   Trainer trainer(model, info, to);
   if (o.resume && fs::exists(o.checkpoint)) {
     trainer.loadCheckpoint(o.checkpoint);

@@ -213,6 +213,69 @@ TEST_CASE("training steps lower the diffusion loss on a fixed batch") {
   CHECK(after < 0.95 * before);  // fresh noise every step: slow but steady
 }
 
+namespace {
+
+// Knows the clean image: answers the exact noise z_t holds relative to it, and
+// records what the loss fed it.
+class CleanOracle : public ConditionalDenoiser {
+ public:
+  CleanOracle(torch::Tensor x0, NoiseSchedule schedule)
+      : x0_(std::move(x0)), schedule_(std::move(schedule)) {}
+  torch::Tensor forward(const torch::Tensor& z_t, const torch::Tensor& t, const torch::Tensor&,
+                        const torch::Tensor&) override {
+    z_t_ = z_t.clone();
+    steps_ = t.to(torch::kLong);  // the training schedule: model timestep = step
+    const auto ab = alphaBarAt(schedule_, steps_);
+    return (z_t - ab.sqrt() * x0_) / (1 - ab).sqrt();
+  }
+  int64_t sizeMultiple() const override { return 1; }
+  torch::Tensor z_t_, steps_;
+
+ private:
+  torch::Tensor x0_;
+  NoiseSchedule schedule_;
+};
+
+}  // namespace
+
+TEST_CASE("render-start training: z_t diffuses the render at a step covering its noise") {
+  const NoiseSchedule schedule = makeSchedule(ScheduleKind::Cosine);
+  TrainBatch batch;
+  auto generator = at::detail::createCPUGenerator(3);
+  batch.target = torch::rand({4, 3, 32, 32}, generator, torch::kFloat) * 0.5 + 0.25;
+  batch.noisy = batch.target + 0.1 * torch::randn({4, 3, 32, 32}, generator, torch::kFloat);
+  const auto x0 = modelSpaceFromTonemapped(batch.target);
+  const auto render = modelSpaceFromTonemapped(batch.noisy);
+  CleanOracle oracle(x0, schedule);
+
+  DiffusionLossOptions options;
+  options.max_timestep = 600;
+  options.render_start = 1.0;
+  // The target is the noise relative to the clean image, which the oracle knows.
+  CHECK(diffusionLoss(oracle, schedule, Prediction::Epsilon, batch, generator, options)
+            .item<double>() < 1e-8);
+  for (int64_t i = 0; i < 4; ++i) {
+    const int64_t step = oracle.steps_[i].item<int64_t>();
+    const double ab = schedule.alphaBar(step);
+    CAPTURE(step);
+    CHECK(step < 600);
+    // The forward noise covers the render's RMS noise (0.2 in model space)...
+    CHECK(std::sqrt((1 - ab) / ab) >= 0.2 * 0.95);
+    // ...and what is left after removing the scaled render is that noise alone.
+    const auto injected = (oracle.z_t_[i] - std::sqrt(ab) * render[i]) / std::sqrt(1 - ab);
+    CHECK(injected.std().item<double>() == doctest::Approx(1.0).epsilon(0.05));
+    CHECK(injected.mean().item<double>() == doctest::Approx(0.0).epsilon(0.05));
+  }
+
+  // Without render starts, z_t diffuses the clean image, below max_timestep.
+  options.render_start = 0.0;
+  for (int repeat = 0; repeat < 5; ++repeat) {
+    CHECK(diffusionLoss(oracle, schedule, Prediction::Epsilon, batch, generator, options)
+              .item<double>() < 1e-8);
+    CHECK(oracle.steps_.max().item<int64_t>() < 600);
+  }
+}
+
 TEST_CASE("regression ablation: L1 on a direct prediction, saved and reloaded as regression") {
   auto info = tinyInfo(true);
   info.objective = Objective::Regression;

@@ -2,6 +2,7 @@
 
 #include <ATen/CPUGeneratorImpl.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -33,17 +34,43 @@ void checkBatch(const TrainBatch& batch) {
 
 torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& schedule,
                             Prediction prediction, const TrainBatch& batch,
-                            torch::Generator& generator) {
+                            torch::Generator& generator, const DiffusionLossOptions& options) {
   checkBatch(batch);
   const auto x0 = modelSpaceFromTonemapped(batch.target);
   const auto cond = modelSpaceFromTonemapped(batch.noisy);
   const int64_t b = x0.size(0);
-  auto steps = torch::randint(0, schedule.size(), {b}, generator, torch::kLong);
+  const int64_t maxStep = options.max_timestep > 0
+                              ? std::clamp<int64_t>(options.max_timestep, 1, schedule.size())
+                              : schedule.size();
+  auto steps = torch::randint(0, maxStep, {b}, generator, torch::kLong);
   auto noise = torch::randn(x0.sizes(), generator, x0.options());
+  if (options.render_start <= 0) {
+    auto alpha_bar = alphaBarAt(schedule, steps);
+    auto output = model.predict(forwardDiffuse(x0, noise, alpha_bar),
+                                modelTimestepsAt(schedule, steps), cond, batch.aux);
+    return torch::mse_loss(output, predictionTarget(prediction, x0, noise, alpha_bar));
+  }
+  auto fromRender = torch::rand({b}, generator) < options.render_start;
+  auto start = x0.clone();
+  for (int64_t i = 0; i < b; ++i) {
+    if (!fromRender[i].item<bool>()) continue;
+    // The render's noise level (RMS: a median is 0 on black backgrounds);
+    // sampling starts where the forward noise covers it.
+    const auto renderNoise = (cond[i] - x0[i]).pow(2).mean().sqrt().item<double>();
+    const int64_t cover = schedule.size() - 1 - maxSkipForNoise(schedule, renderNoise);
+    const int64_t span = std::max<int64_t>(1, maxStep - cover);
+    steps[i] = std::min(cover + torch::randint(0, span, {1}, generator).item<int64_t>(),
+                        schedule.size() - 1);
+    start[i] = cond[i];
+  }
   auto alpha_bar = alphaBarAt(schedule, steps);
-  auto z_t = forwardDiffuse(x0, noise, alpha_bar);
+  auto z_t = forwardDiffuse(start, noise, alpha_bar);
+  // The noise z_t carries relative to the target: the injected noise plus the
+  // render's own, so starting from a noised render is what the model learns.
+  auto eps = torch::where(fromRender.view({b, 1, 1, 1}),
+                          (z_t - alpha_bar.sqrt() * x0) / (1 - alpha_bar).sqrt(), noise);
   auto output = model.predict(z_t, modelTimestepsAt(schedule, steps), cond, batch.aux);
-  return torch::mse_loss(output, predictionTarget(prediction, x0, noise, alpha_bar));
+  return torch::mse_loss(output, predictionTarget(prediction, x0, eps, alpha_bar));
 }
 
 torch::Tensor regressionLoss(ConditionalDenoiser& model, const TrainBatch& batch) {
@@ -128,7 +155,7 @@ double Trainer::evaluate(const TrainBatch& batch, uint64_t seed) {
 
 torch::Tensor Trainer::loss(const TrainBatch& batch, torch::Generator& generator) {
   if (info_.objective == Objective::Regression) return regressionLoss(*model_, batch);
-  return diffusionLoss(*model_, schedule_, info_.prediction, batch, generator);
+  return diffusionLoss(*model_, schedule_, info_.prediction, batch, generator, options_.diffusion);
 }
 
 void Trainer::updateEma() {

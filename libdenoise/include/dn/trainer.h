@@ -25,6 +25,15 @@ struct TrainBatch {
   torch::Tensor target;  // (B,3,H,W) the clean image
 };
 
+// Which (z_t, t) pairs the diffusion loss trains on.
+struct DiffusionLossOptions {
+  int64_t max_timestep = 0;  // timesteps drawn below this one only (0: the whole schedule)
+  // Fraction of samples whose z_t forward-diffuses the noisy render instead of the
+  // target, as dndenoise starts sampling, at a step whose noise covers the render's
+  // RMS noise level; the target is then the effective noise (z_t - a x0) / s.
+  double render_start = 0.0;
+};
+
 struct TrainerOptions {
   double learning_rate = 2e-4;
   int64_t halve_every = 0;     // halve the learning rate every this many steps (0: never)
@@ -32,6 +41,7 @@ struct TrainerOptions {
   double ema_decay = 0.999;
   double max_grad_norm = 1.0;  // 0 disables clipping
   uint64_t seed = 0;
+  DiffusionLossOptions diffusion;
 };
 
 struct StepStats {
@@ -44,7 +54,7 @@ struct StepStats {
 // model's prediction type, all drawn from `generator`.
 torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& schedule,
                             Prediction prediction, const TrainBatch& batch,
-                            torch::Generator& generator);
+                            torch::Generator& generator, const DiffusionLossOptions& options = {});
 
 // The regression ablation's loss: L1 between regressDirect's output and the target.
 torch::Tensor regressionLoss(ConditionalDenoiser& model, const TrainBatch& batch);
