@@ -92,6 +92,16 @@ def main():
         lines = [json.loads(line) for line in f]
     check("dntrain regression: L1 validation logged", len(lines) == 3 and "val_l1" in lines[-1], lines)
 
+    # Fine-tuning a controlled model (--init) with render starts.
+    out = run([dntrain, "control", "--data", data, "--init", p("straight.dnm"), "--steps", "2",
+               "--val-every", "0", "--max-timestep", "600", "--render-start", "0.5",
+               "--out", p("finetuned.dnm")] + tiny)
+    check("dntrain control --init: exit 0 and a model file",
+          out.returncode == 0 and os.path.exists(p("finetuned.dnm")), out.stderr)
+    expect_error("dntrain control --init of a prior",
+                 [dntrain, "control", "--data", data, "--init", p("base.dnm"), "--out", p("x0.dnm")],
+                 "base.dnm", p("x0.dnm"))
+
     model = p("straight.dnm")
     frame = os.path.join(data, "val", "scene_0", "frame_0", "spp4_00.exr")
     ref = os.path.join(data, "val", "scene_0", "frame_0", "gt_a.exr")
