@@ -83,6 +83,16 @@ TEST_CASE("restoreHighlights keeps lights above the range, not isolated fireflie
   CHECK(out[0][2][2][2].item<double>() == 20.0);  // its corner: eroded, then dilated back
   CHECK(out[0][0][9][9].item<double>() == 0.5);   // the firefly stays removed
   CHECK(torch::equal(out.narrow(3, 7, 5), denoised.narrow(3, 7, 5)));
+  // A one-pixel line above the range, which the network also clipped: kept,
+  // with the render's colour instead of a hue shifted by the per-channel clip.
+  auto line = torch::full({1, 3, 12, 12}, 0.5);
+  line.narrow(3, 6, 1).select(1, 0).fill_(4.0);
+  line.narrow(3, 6, 1).select(1, 2).fill_(9.0);
+  auto clipped = line.clamp_max(6.0) * 0.995;
+  const auto lineOut = restoreHighlights(clipped, line, 6.0);
+  CHECK(lineOut[0][2][5][6].item<double>() == 9.0);
+  CHECK(lineOut[0][0][5][6].item<double>() == 4.0);
+  CHECK(torch::equal(lineOut.narrow(3, 0, 6), clipped.narrow(3, 0, 6)));
   // Below the range nothing changes; NaN and Inf in the render do not leak.
   CHECK(torch::equal(restoreHighlights(denoised, render, 25.0), denoised));
   render[0][1][3][3] = std::numeric_limits<float>::quiet_NaN();

@@ -14,7 +14,12 @@ torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tens
   // Erosion (min over 3x3) rejects isolated fireflies; the dilation after it
   // brings back the highlight's border pixels.
   const auto bright = -pool(-peak) >= rangeMax;
-  const auto keep = pool(bright.to(torch::kFloat)) > 0.5;
+  // A thin highlight (a specular line, a lamp's rim) fails the erosion, but
+  // there the network itself answered "as bright as I can say": its result is
+  // at the top of the range, where a removed firefly's is not.
+  const auto saturated =
+      (peak >= rangeMax) & (std::get<0>(denoised.max(1, true)) >= kSaturated * rangeMax);
+  const auto keep = (pool(bright.to(torch::kFloat)) > 0.5) | saturated;
   if (!keep.any().item<bool>()) return denoised;
   return torch::where(keep, torch::maximum(clean, denoised), denoised);
 }
