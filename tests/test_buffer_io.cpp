@@ -37,8 +37,9 @@ float code(int layer, int i, int c) { return layer + 0.01f * i + 0.001f * c; }
 
 // A Blender-style multilayer EXR: ViewLayer.<Pass>.<Chan>, with a metadata entry.
 void writeBlenderLike(const std::string& path, int w, int h,
-                      const std::map<std::string, std::string>& attributes = {}) {
-  const std::vector<std::vector<std::string>> layers = {
+                      const std::map<std::string, std::string>& attributes = {},
+                      bool noisyImage = false) {
+  std::vector<std::vector<std::string>> layers = {
       {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B",
        "ViewLayer.Combined.A"},
       {"ViewLayer.Denoising Albedo.R", "ViewLayer.Denoising Albedo.G",
@@ -48,6 +49,9 @@ void writeBlenderLike(const std::string& path, int w, int h,
       {"ViewLayer.Denoising Depth.Z"},
       {"ViewLayer.GlossInd.R", "ViewLayer.GlossInd.G", "ViewLayer.GlossInd.B"},
       {"ViewLayer.roughness.X"}};
+  if (noisyImage)  // with Cycles' own denoiser on, Combined is denoised
+    layers.push_back({"ViewLayer.Noisy Image.R", "ViewLayer.Noisy Image.G",
+                      "ViewLayer.Noisy Image.B", "ViewLayer.Noisy Image.A"});
   std::vector<std::string> names;
   for (const auto& l : layers) names.insert(names.end(), l.begin(), l.end());
   OIIO::ImageSpec spec(w, h, static_cast<int>(names.size()), OIIO::TypeDesc::FLOAT);
@@ -100,6 +104,15 @@ TEST_CASE("Blender multilayer buffers are found by name") {
   CHECK(frame.get("normal").at(3, 2, 1) == doctest::Approx(code(2, 11, 1)));
   CHECK(frame.get("depth").channels == 1);
   CHECK(frame.get("roughness").at(0, 1, 0) == doctest::Approx(code(5, 4, 0)));
+  CHECK(layerPrefixOf(frame) == "ViewLayer.");
+}
+
+TEST_CASE("a render Cycles denoised itself is denoised from its Noisy Image pass") {
+  TempDir dir;
+  writeBlenderLike(dir / "frame.exr", 4, 3, {}, true);
+  FrameBuffers frame = readFrame(dir / "frame.exr");
+  CHECK(frame.get("color").at(1, 2, 2) == doctest::Approx(code(6, 9, 2)));
+  CHECK(frame.get("albedo").at(1, 2, 2) == doctest::Approx(code(1, 9, 2)));
   CHECK(layerPrefixOf(frame) == "ViewLayer.");
 }
 

@@ -10,7 +10,9 @@ const std::vector<BufferSpec>& canonicalBuffers() {
   static const std::vector<BufferSpec> specs = {
       {"color",
        3,
-       {"Combined", "", "rgba", "RGBA", "beauty", "color", "Ci"},
+       // Cycles writes "Noisy Image" when its own denoiser ran: Combined is
+       // then already denoised.
+       {"Noisy Image", "Combined", "", "rgba", "RGBA", "beauty", "color", "Ci"},
        "noisy radiance (HDR, linear)"},
       {"albedo", 3, {"Denoising Albedo", "albedo", "Albedo", "alb"}, "first-hit albedo"},
       {"normal", 3, {"Denoising Normal", "normal", "Normal", "N", "nrm"}, "first-hit normal"},
