@@ -27,8 +27,10 @@ def run_timed(cmd):
     if out.returncode != 0:
         sys.exit(f"dndenoise_bench: {' '.join(cmd)} failed:\n{out.stderr}")
     rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", out.stderr).group(1))
-    line = re.search(r"(\d+) steps, (\d+) tile\(s\) of (\d+) px, ([\d.]+) s \(median of (\d+)\), ([\d.]+) s/MPix",
-                     out.stderr)
+    line = re.search(r"(\d+) steps, [^\n]*?(\d+) tile\(s\) of (\d+) px, ([\d.]+) s \(median of (\d+)\), "
+                     r"([\d.]+) s/MPix", out.stderr)
+    if not line:
+        sys.exit(f"dndenoise_bench: no timing line in the output of {' '.join(cmd)}:\n{out.stderr}")
     return {"steps": int(line.group(1)), "tiles": int(line.group(2)), "tile": int(line.group(3)),
             "seconds": float(line.group(4)), "s_per_mpix": float(line.group(6)), "rss_gb": rss_kb / 1e6}
 
