@@ -30,6 +30,17 @@ void checkBatch(const TrainBatch& batch) {
                 "aux must be (B,C,H,W) matching the noisy image");
 }
 
+// A step between the first whose forward noise covers the render's noise (RMS:
+// a median is 0 on black backgrounds), where sampling would start, and maxStep.
+int64_t renderStartStep(const NoiseSchedule& schedule, const torch::Tensor& renderNoise,
+                        int64_t maxStep, torch::Generator& generator) {
+  const double level = renderNoise.pow(2).mean().sqrt().item<double>();
+  const int64_t cover = schedule.size() - 1 - maxSkipForNoise(schedule, level);
+  const int64_t span = std::max<int64_t>(1, maxStep - cover);
+  return std::min(cover + torch::randint(0, span, {1}, generator).item<int64_t>(),
+                  schedule.size() - 1);
+}
+
 }  // namespace
 
 torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& schedule,
@@ -54,14 +65,8 @@ torch::Tensor diffusionLoss(ConditionalDenoiser& model, const NoiseSchedule& sch
   auto start = x0.clone();
   for (int64_t i = 0; i < b; ++i) {
     if (!fromRender[i].item<bool>()) continue;
-    // The render's noise level (RMS: a median is 0 on black backgrounds);
-    // sampling starts where the forward noise covers it.
-    const auto renderNoise = (cond[i] - x0[i]).pow(2).mean().sqrt().item<double>();
-    const int64_t cover = schedule.size() - 1 - maxSkipForNoise(schedule, renderNoise);
-    const int64_t span = std::max<int64_t>(1, maxStep - cover);
-    steps[i] = std::min(cover + torch::randint(0, span, {1}, generator).item<int64_t>(),
-                        schedule.size() - 1);
     start[i] = cond[i];
+    steps[i] = renderStartStep(schedule, cond[i] - x0[i], maxStep, generator);
   }
   auto alpha_bar = alphaBarAt(schedule, steps);
   auto z_t = forwardDiffuse(start, noise, alpha_bar);
