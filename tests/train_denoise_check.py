@@ -80,7 +80,12 @@ def main():
     out = run(control + ["--out", p("resumed.dnm"), "--resume"])
     check("--resume finishes the run", out.returncode == 0 and os.path.exists(p("resumed.dnm")), out.stderr)
     straight, resumed = log_losses(p("straight.dnm.log.jsonl")), log_losses(log)
-    check("resumed losses equal the uninterrupted run's at every step", straight == resumed,
+    # A wrong optimizer, RNG or data position moves the losses by percents. Once
+    # in many CI runs the last of the 6 logged digits differed (1e-6 relative,
+    # cause not found), so the comparison allows 1e-5.
+    check("resumed losses equal the uninterrupted run's at every step",
+          straight.keys() == resumed.keys()
+          and all(abs(straight[k] - resumed[k]) <= 1e-5 * abs(straight[k]) for k in straight),
           f"{straight} vs {resumed}")
 
     # The single-pass regression ablation: trains from the prior, dndenoise runs it in one step.
