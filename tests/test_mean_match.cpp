@@ -72,6 +72,26 @@ TEST_CASE("matchLocalMean bounds the correction and survives non-finite renders"
   CHECK(torch::isfinite(matchLocalMean(denoised, render, 2.0)).all().item<bool>());
 }
 
+TEST_CASE("keepBlack: black where the render is black over 3x3, nowhere else") {
+  auto render = torch::zeros({1, 3, 10, 10});
+  render.narrow(3, 5, 5).fill_(0.3);  // lit right half
+  render[0][1][2][7] = 0.0f;          // one channel of a lit pixel is 0
+  render[0][0][6][7] = 0.0f;          // a lone black pixel in the light (a 4-spp zero)
+  render[0][1][6][7] = 0.0f;
+  render[0][2][6][7] = 0.0f;
+  auto denoised = torch::full({1, 3, 10, 10}, 1e-3);  // the network's haze, and light
+  denoised.narrow(3, 5, 5).fill_(0.29);
+  const auto out = keepBlack(denoised, render);
+  CHECK(out.narrow(3, 0, 4).abs().max().item<double>() == 0.0);  // black, away from the light
+  CHECK(torch::equal(out.narrow(3, 4, 6), denoised.narrow(3, 4, 6)));  // light and its border
+  // NaN counts as black, Inf as light.
+  render[0][0][1][1] = std::numeric_limits<float>::quiet_NaN();
+  render[0][0][8][1] = std::numeric_limits<float>::infinity();
+  const auto odd = keepBlack(denoised, render);
+  CHECK(odd[0][0][1][1].item<double>() == 0.0);
+  CHECK(odd[0][0][8][1].item<double>() == doctest::Approx(1e-3));
+}
+
 TEST_CASE("restoreHighlights keeps lights above the range, not isolated fireflies") {
   auto render = torch::full({1, 3, 12, 12}, 0.5);
   render.narrow(2, 2, 4).narrow(3, 2, 4).fill_(20.0);  // a 4x4 light

@@ -24,4 +24,12 @@ torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tens
   return torch::where(keep, torch::maximum(clean, denoised), denoised);
 }
 
+torch::Tensor keepBlack(const torch::Tensor& denoised, const torch::Tensor& render) {
+  torch::NoGradGuard noGrad;
+  namespace F = torch::nn::functional;
+  const auto peak = std::get<0>(torch::nan_to_num(render, 0.0).max(1, true));
+  const auto black = F::max_pool2d(peak, F::MaxPool2dFuncOptions(3).stride(1).padding(1)) <= 0;
+  return torch::where(black, torch::zeros_like(denoised), denoised);
+}
+
 }  // namespace dn

@@ -22,4 +22,11 @@ constexpr double kSaturated = 0.98;
 torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tensor& render,
                                 double rangeMax);
 
+// The other end of the range: where the render is exactly black (every channel
+// <= 0) over the 3x3 neighbourhood of a pixel, every path there returned
+// nothing, so the result is black too rather than the faint haze the network
+// leaves on black backgrounds. A lone zero pixel in a lit region is not
+// touched. NaN in the render counts as black, Inf as light.
+torch::Tensor keepBlack(const torch::Tensor& denoised, const torch::Tensor& render);
+
 }  // namespace dn
