@@ -175,10 +175,11 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   torch::Tensor mean = sum / n;
   const torch::Tensor render = imageToTensor(frame.get("color"));
   const double rangeMax = tonemap::kHdrMax / exposure;  // the model's range in input units
-  result.color = tensorToImage(
-      keepBlack(restoreHighlights(matchLocalMean(mean, render, plan.meanMatchSigma, 4.0, rangeMax),
-                                  render, rangeMax),
-                render));
+  // The render's own evidence where the network cannot be trusted: its local
+  // means, its lights above the model's range and its black.
+  torch::Tensor color = matchLocalMean(mean, render, plan.meanMatchSigma, 4.0, rangeMax);
+  color = keepBlack(restoreHighlights(color, render, rangeMax), render);
+  result.color = tensorToImage(color);
   if (samples > 1) {
     torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
     result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
