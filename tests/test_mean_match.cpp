@@ -72,7 +72,7 @@ TEST_CASE("matchLocalMean bounds the correction and survives non-finite renders"
   CHECK(torch::isfinite(matchLocalMean(denoised, render, 2.0)).all().item<bool>());
 }
 
-TEST_CASE("keepBlack: black where the render is black over 3x3, nowhere else") {
+TEST_CASE("keepBlack: black where the render is black over the window, nowhere else") {
   auto render = torch::zeros({1, 3, 10, 10});
   render.narrow(3, 5, 5).fill_(0.3);  // lit right half
   render[0][1][2][7] = 0.0f;          // one channel of a lit pixel is 0
@@ -81,15 +81,25 @@ TEST_CASE("keepBlack: black where the render is black over 3x3, nowhere else") {
   render[0][2][6][7] = 0.0f;
   auto denoised = torch::full({1, 3, 10, 10}, 1e-3);  // the network's haze, and light
   denoised.narrow(3, 5, 5).fill_(0.29);
-  const auto out = keepBlack(denoised, render);
-  CHECK(out.narrow(3, 0, 4).abs().max().item<double>() == 0.0);  // black, away from the light
+  const auto out = keepBlack(denoised, render, 3);
+  CHECK(out.narrow(3, 0, 4).abs().max().item<double>() == 0.0);        // black, away from the light
   CHECK(torch::equal(out.narrow(3, 4, 6), denoised.narrow(3, 4, 6)));  // light and its border
   // NaN counts as black, Inf as light.
   render[0][0][1][1] = std::numeric_limits<float>::quiet_NaN();
   render[0][0][8][1] = std::numeric_limits<float>::infinity();
-  const auto odd = keepBlack(denoised, render);
+  const auto odd = keepBlack(denoised, render, 3);
   CHECK(odd[0][0][1][1].item<double>() == 0.0);
   CHECK(odd[0][0][8][1].item<double>() == doctest::Approx(1e-3));
+  // A wider window asks for more black around: 5x5 keeps column 3's haze.
+  CHECK(keepBlack(denoised, render, 5)[0][0][5][3].item<double>() == doctest::Approx(1e-3));
+  CHECK(keepBlack(denoised, render, 5)[0][0][5][2].item<double>() == 0.0);
+  // At least 512 samples: 3x3 from 64 spp up, 7x7 at 16, 13x13 at 4 or unknown.
+  CHECK(blackWindow(512) == 3);
+  CHECK(blackWindow(64) == 3);
+  CHECK(blackWindow(16) == 7);
+  CHECK(blackWindow(4) == 13);
+  CHECK(blackWindow(0) == 13);
+  CHECK(blackWindow(1) == 23);
 }
 
 TEST_CASE("restoreHighlights keeps lights above the range, not isolated fireflies") {

@@ -178,7 +178,7 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   // The render's own evidence where the network cannot be trusted: its local
   // means, its lights above the model's range and its black.
   torch::Tensor color = matchLocalMean(mean, render, plan.meanMatchSigma, 4.0, rangeMax);
-  color = keepBlack(restoreHighlights(color, render, rangeMax), render);
+  color = keepBlack(restoreHighlights(color, render, rangeMax), render, blackWindow(plan.spp));
   result.color = tensorToImage(color);
   if (samples > 1) {
     torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));

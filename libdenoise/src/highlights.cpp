@@ -1,5 +1,8 @@
 #include "dn/highlights.h"
 
+#include <algorithm>
+#include <cmath>
+
 namespace dn {
 
 torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tensor& render,
@@ -24,12 +27,20 @@ torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tens
   return torch::where(keep, torch::maximum(clean, denoised), denoised);
 }
 
-torch::Tensor keepBlack(const torch::Tensor& denoised, const torch::Tensor& render) {
+torch::Tensor keepBlack(const torch::Tensor& denoised, const torch::Tensor& render,
+                        int64_t window) {
   torch::NoGradGuard noGrad;
   namespace F = torch::nn::functional;
   const auto peak = std::get<0>(torch::nan_to_num(render, 0.0).max(1, true));
-  const auto black = F::max_pool2d(peak, F::MaxPool2dFuncOptions(3).stride(1).padding(1)) <= 0;
+  const auto black =
+      F::max_pool2d(peak, F::MaxPool2dFuncOptions(window).stride(1).padding(window / 2)) <= 0;
   return torch::where(black, torch::zeros_like(denoised), denoised);
+}
+
+int64_t blackWindow(int spp) {
+  const double pixels = double(kBlackEvidenceSamples) / (spp > 0 ? spp : 4);
+  const auto side = static_cast<int64_t>(std::ceil(std::sqrt(pixels)));
+  return std::max<int64_t>(3, side % 2 ? side : side + 1);
 }
 
 }  // namespace dn

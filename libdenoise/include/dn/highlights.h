@@ -23,10 +23,18 @@ torch::Tensor restoreHighlights(const torch::Tensor& denoised, const torch::Tens
                                 double rangeMax);
 
 // The other end of the range: where the render is exactly black (every channel
-// <= 0) over the 3x3 neighbourhood of a pixel, every path there returned
-// nothing, so the result is black too rather than the faint haze the network
-// leaves on black backgrounds. A lone zero pixel in a lit region is not
-// touched. NaN in the render counts as black, Inf as light.
-torch::Tensor keepBlack(const torch::Tensor& denoised, const torch::Tensor& render);
+// <= 0) over the window x window neighbourhood of a pixel, every path there
+// returned nothing, so the result is black too rather than the faint haze the
+// network leaves on black backgrounds. NaN in the render counts as black, Inf
+// as light.
+torch::Tensor keepBlack(const torch::Tensor& denoised, const torch::Tensor& render, int64_t window);
+
+// How many zero samples make a region black: a dim region at 4 spp has zeros
+// over many pixels by chance.
+constexpr int kBlackEvidenceSamples = 512;
+
+// The smallest odd window (at least 3) whose pixels hold kBlackEvidenceSamples
+// samples at `spp`; an unknown count (0) is taken as 4.
+int64_t blackWindow(int spp);
 
 }  // namespace dn
