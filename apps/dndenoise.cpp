@@ -335,9 +335,12 @@ int run(Options o) {
       std::sort(times.begin(), times.end());
       fmt::print(
           stderr,
-          "dndenoise: {}: {} spp, exposure x{:.3g}, skip {}, {} steps, mean matching {:.2g} px, "
-          "{} tile(s) of {} px, {:.2f} s (median of {}), {:.2f} s/MPix\n",
+          "dndenoise: {}: {} spp, exposure x{:.3g}, {}, skip {}, {} steps, mean matching {:.2g} "
+          "px, {} tile(s) of {} px, {:.2f} s (median of {}), {:.2f} s/MPix\n",
           name, result.plan.spp > 0 ? std::to_string(result.plan.spp) : "unknown", result.exposure,
+          result.plan.noise >= 0 ? fmt::format("noise {:.3g} (x{:.2f} the model's)",
+                                               result.plan.noise, result.plan.noiseScale)
+                                 : std::string("noise not measured"),
           result.plan.skip, result.steps, result.plan.meanMatchSigma, result.tileCount,
           result.tileSize, times[times.size() / 2], times.size(),
           times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));

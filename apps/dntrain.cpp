@@ -21,6 +21,7 @@
 #include "common/cli.h"
 #include "dn/buffer_io.h"
 #include "dn/control_module.h"
+#include "dn/denoiser.h"
 #include "dn/distributed.h"
 #include "dn/model_inputs.h"
 #include "dn/sampler.h"
@@ -38,7 +39,7 @@ const char* kUsage =
        dntrain control --data DIR --base base.dnm|--init model.dnm --out model.dnm [options]
        dntrain regression --data DIR --base base.dnm --out reg.dnm [options]
        dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--default-spp N]
-                        [--exposure-target Y] [--out FILE]
+                        [--exposure-target Y] [--noise-reference RENDER ...] [--out FILE]
        dntrain prior --model model.dnm --out base.dnm
 
 base     pretrains the pixel-space prior on clean images (the data set's ground
@@ -80,6 +81,10 @@ options:
                         scales skip and mean matching to other spp from it
   --exposure-target Y   defaults: dndenoise scales each frame so the mean of its
                         luminance (clamped to 6) is Y
+  --noise-reference FILE  defaults (repeatable): renders like those the default skip
+                        was tuned on; their mean measured noise becomes the model's
+                        noise_reference, and dndenoise scales skip and mean
+                        matching by each render's measured noise relative to it
   --model FILE          defaults: the model file to change
   --val-every N         validation every N steps (default 250; 0 disables)
   --log FILE            JSON-lines log (default: OUT.log.jsonl)
@@ -101,7 +106,7 @@ extern "C" void onSignal(int) { stopRequested = true; }
 
 struct Options {
   std::string mode, data, base, init, out, log, checkpoint, model, respacing;
-  std::vector<std::string> photos;
+  std::vector<std::string> photos, noiseReference;
   std::string aux = "default", prediction = "eps";
   std::vector<int> spp = {4, 16, 64};
   int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
@@ -185,6 +190,8 @@ Options parseArgs(int argc, char** argv) {
       o.defaultSkip = args.intValue("--default-skip");
     else if (args.flag("--exposure-target"))
       o.exposureTarget = args.doubleValue("--exposure-target");
+    else if (args.flag("--noise-reference"))
+      o.noiseReference.push_back(args.value("--noise-reference"));
     else if (args.flag("--default-spp"))
       o.defaultSpp = args.intValue("--default-spp");
     else if (args.flag("--respacing"))
@@ -220,9 +227,11 @@ Options parseArgs(int argc, char** argv) {
   }
   if (o.mode == "defaults") {
     if (o.model.empty()) throw cli::UsageError("defaults needs --model");
-    if (o.respacing.empty() && o.defaultSkip < 0 && o.defaultSpp < 0 && o.exposureTarget == -1.0)
+    if (o.respacing.empty() && o.defaultSkip < 0 && o.defaultSpp < 0 && o.exposureTarget == -1.0 &&
+        o.noiseReference.empty())
       throw cli::UsageError(
-          "defaults needs one of --respacing, --default-skip, --default-spp, --exposure-target");
+          "defaults needs one of --respacing, --default-skip, --default-spp, --exposure-target, "
+          "--noise-reference");
     if (o.exposureTarget != -1.0 && !(o.exposureTarget > 0.0 && o.exposureTarget < 6.0))
       throw cli::UsageError("--exposure-target must be in (0, 6)");
     if (o.defaultSpp == 0 || o.defaultSpp < -1)
@@ -400,6 +409,16 @@ int setDefaults(const Options& o) {
   if (o.defaultSkip >= 0) info.notes["default_skip"] = std::to_string(o.defaultSkip);
   if (o.defaultSpp > 0) info.notes["default_spp"] = std::to_string(o.defaultSpp);
   if (o.exposureTarget > 0) info.notes["exposure_target"] = fmt::format("{}", o.exposureTarget);
+  if (!o.noiseReference.empty()) {
+    const Denoiser denoiser(loaded);  // measures at the exposure target just set
+    double sum = 0.0;
+    for (const auto& path : o.noiseReference) {
+      const double noise = denoiser.measureNoise(readFrame(path));
+      fmt::print(stderr, "dntrain: {}: noise {:.4f}\n", path, noise);
+      sum += noise;
+    }
+    info.notes["noise_reference"] = fmt::format("{:.4f}", sum / o.noiseReference.size());
+  }
   auto& skip = info.notes["default_skip"];
   if (skip.empty()) skip = "0";
   try {
@@ -410,9 +429,13 @@ int setDefaults(const Options& o) {
   saveModelFile(o.out, info, *loaded.model);
   auto spp = info.notes.find("default_spp");
   auto exposure = info.notes.find("exposure_target");
-  fmt::print(stderr, "dntrain: {}: respacing {}, skip {}, tuned at {} spp, exposure target {}\n",
+  auto noise = info.notes.find("noise_reference");
+  fmt::print(stderr,
+             "dntrain: {}: respacing {}, skip {}, tuned at {} spp, exposure target {}, noise "
+             "reference {}\n",
              o.out, info.respacing, skip, spp == info.notes.end() ? "unknown" : spp->second,
-             exposure == info.notes.end() ? "none" : exposure->second);
+             exposure == info.notes.end() ? "none" : exposure->second,
+             noise == info.notes.end() ? "none" : noise->second);
   return cli::kExitOk;
 }
 

@@ -86,6 +86,63 @@ TEST_CASE("default skip and mean matching radius follow the input's noise level"
   CHECK(planSampling(info, schedule, defaults, 64).meanMatchSigma == kDefaultMeanMatchSigma);
 }
 
+TEST_CASE("a measured noise level wins over the sample count when the model has a reference") {
+  ModelInfo info = tinyInfo();
+  info.notes["default_spp"] = "4";
+  info.notes["noise_reference"] = "0.2";
+  const NoiseSchedule schedule = info.samplingSchedule();
+  const DenoiseOptions defaults;
+  const double anchor = startNoise(schedule, 18);
+
+  // As noisy as the reference: the defaults, whatever the file's count says.
+  const auto same = planSampling(info, schedule, defaults, 64, 0.2);
+  CHECK(same.skip == 18);
+  CHECK(same.noiseScale == doctest::Approx(1.0));
+  CHECK(same.meanMatchSigma == doctest::Approx(kDefaultMeanMatchSigma));
+  CHECK(same.spp == 64);  // still known (black regions use it)
+  // Half the noise: the same plan as 4x the samples.
+  const auto half = planSampling(info, schedule, defaults, 4, 0.1);
+  CHECK(half.noiseScale == doctest::Approx(0.5));
+  CHECK(half.skip == planSampling(info, schedule, defaults, 16).skip);
+  CHECK(half.meanMatchSigma == doctest::Approx(1.0));
+  // Twice the noise: an earlier start that still covers it, a wider radius.
+  const auto twice = planSampling(info, schedule, defaults, 4, 0.4);
+  CHECK(twice.skip < 18);
+  CHECK(startNoise(schedule, twice.skip) >= 2.0 * anchor);
+  CHECK(twice.meanMatchSigma == doctest::Approx(4.0));
+  // Bounded: no start from pure noise, no zero radius.
+  CHECK(planSampling(info, schedule, defaults, 4, 100.0).noiseScale == kMaxNoiseScale);
+  CHECK(planSampling(info, schedule, defaults, 4, 0.0).noiseScale == kMinNoiseScale);
+
+  // --spp is the user's word: the sample count decides, not the measurement.
+  DenoiseOptions withSpp;
+  withSpp.spp = 16;
+  CHECK(planSampling(info, schedule, withSpp, 4, 0.4).noiseScale == doctest::Approx(0.5));
+  // Not measured, or no reference in the model: the sample count decides.
+  CHECK(planSampling(info, schedule, defaults, 16).noiseScale == doctest::Approx(0.5));
+  info.notes.erase("noise_reference");
+  CHECK(planSampling(info, schedule, defaults, 16, 0.4).noiseScale == doctest::Approx(0.5));
+}
+
+TEST_CASE("denoise measures the render's noise only when the model has a reference") {
+  torch::manual_seed(5);
+  ModelInfo info = tinyInfo();
+  LoadedModel loaded{info, buildDenoiser(info)};
+  FrameBuffers frame;
+  frame.width = frame.height = 16;
+  frame.buffers["color"] = randomImage(16, 16, 3, 0.5, 4);
+  frame.buffers["albedo"] = randomImage(16, 16, 3, 1.0, 5);
+  frame.buffers["diffuse_direct"] = randomImage(16, 16, 3, 0.2, 6);
+  CHECK(Denoiser(loaded).denoise(frame, {}).plan.noise == -1.0);
+
+  loaded.info.notes["noise_reference"] = "0.2";
+  const Denoiser denoiser(loaded);
+  const auto result = denoiser.denoise(frame, {});
+  CHECK(result.plan.noise > 0.0);
+  CHECK(result.plan.noise == doctest::Approx(denoiser.measureNoise(frame)));
+  CHECK(result.plan.noiseScale == doctest::Approx(result.plan.noise / 0.2));
+}
+
 TEST_CASE("autoexposure: a brighter render gives the same result, brighter") {
   torch::manual_seed(3);
   ModelInfo info = tinyInfo();

@@ -168,10 +168,25 @@ def main():
           np.array_equal(read_rgb(p("anchor.exr"), "ViewLayer.Denoised"), denoised))
     out = run([dndenoise, "--model", p("adaptive.dnm"), "--threads", "1", "--spp", "64", "-v",
                frame, "-o", p("spp64.exr")])
-    skip = re.search(r"64 spp, exposure x([0-9.e+-]+), skip (\d+)", out.stderr)
+    skip = re.search(r"64 spp, exposure x([0-9.e+-]+), noise not measured, skip (\d+)", out.stderr)
     check("--spp 64: a later start than the 4-spp default, autoexposure applied, finite output",
           out.returncode == 0 and skip and int(skip.group(2)) > 2 and float(skip.group(1)) != 1.0
           and np.isfinite(read_rgb(p("spp64.exr"), "ViewLayer.Denoised")).all(), out.stderr)
+    # Noise measured on the render itself, against a reference stored in the model.
+    out = run([dntrain, "defaults", "--model", p("adaptive.dnm"), "--noise-reference", frame,
+               "--out", p("measured.dnm")])
+    reference = re.search(r"noise reference ([0-9.]+)", out.stderr)
+    check("dntrain defaults --noise-reference: exit 0, the reference stored",
+          out.returncode == 0 and reference and float(reference.group(1)) > 0, out.stderr)
+    out = run([dndenoise, "--model", p("measured.dnm"), "--threads", "1", "-v", frame, "-o",
+               p("measured.exr")])
+    level = re.search(r"noise ([0-9.e+-]+) \(x([0-9.]+) the model's\), skip (\d+)", out.stderr)
+    check("the reference render itself: measured noise x1, the tuned skip",
+          out.returncode == 0 and level and abs(float(level.group(2)) - 1.0) < 0.01
+          and int(level.group(3)) == 2, out.stderr)
+    expect_error("dntrain defaults --noise-reference of a missing file",
+                 [dntrain, "defaults", "--model", p("adaptive.dnm"), "--noise-reference",
+                  p("nope.exr"), "--out", p("x4.dnm")], "nope.exr", p("x4.dnm"))
     expect_error("dndenoise --spp 0", [dndenoise, "--model", model, "--spp", "0", frame, "-o", p("x1.exr")],
                  "--spp", p("x1.exr"))
     expect_error("dndenoise --exposure -2", [dndenoise, "--model", model, "--exposure", "-2", frame,

@@ -7,15 +7,16 @@
 #include "dn/highlights.h"
 #include "dn/mean_match.h"
 #include "dn/model_inputs.h"
+#include "dn/noise_estimate.h"
 #include "dn/tiler.h"
 
 namespace dn {
 
 namespace {
 
-int64_t noteOr(const ModelInfo& info, const std::string& key, int64_t fallback) {
+double noteOr(const ModelInfo& info, const std::string& key, double fallback) {
   auto it = info.notes.find(key);
-  return it == info.notes.end() ? fallback : std::stoll(it->second);
+  return it == info.notes.end() ? fallback : std::stod(it->second);
 }
 
 // Forward noise at a step in image units, sqrt((1 - alpha_bar) / alpha_bar).
@@ -26,18 +27,29 @@ double noiseLevel(const NoiseSchedule& schedule, int64_t step) {
 
 double exposureFor(const ModelInfo& info, const Image& color, double requested) {
   if (requested > 0.0) return requested;
-  auto it = info.notes.find("exposure_target");
-  return it == info.notes.end() ? 1.0 : tonemap::exposureForMean(color, std::stod(it->second));
+  const double target = noteOr(info, "exposure_target", 0);
+  return target > 0 ? tonemap::exposureForMean(color, target) : 1.0;
+}
+
+// The render's radiance as the network sees it: exposed, clamped, tonemapped, in [-1, 1].
+torch::Tensor modelSpaceRadiance(const ModelInfo& info, const Image& color, double exposure) {
+  return modelSpaceFromTonemapped(
+      tonemapRadiance(imageToTensor(color) * exposure, tonemap::curveFromName(info.tonemap)));
 }
 
 }  // namespace
 
 SamplingPlan planSampling(const ModelInfo& info, const NoiseSchedule& schedule,
-                          const DenoiseOptions& options, int fileSpp) {
+                          const DenoiseOptions& options, int fileSpp, double renderNoise) {
   SamplingPlan plan;
-  const int64_t defaultSpp = noteOr(info, "default_spp", 0);
+  const double defaultSpp = noteOr(info, "default_spp", 0);
+  const double noiseReference = noteOr(info, "noise_reference", 0);
   plan.spp = options.spp > 0 ? options.spp : fileSpp;
-  if (defaultSpp > 0 && plan.spp > 0) plan.noiseScale = std::sqrt(double(defaultSpp) / plan.spp);
+  plan.noise = renderNoise;
+  if (options.spp <= 0 && noiseReference > 0 && renderNoise >= 0)
+    plan.noiseScale = std::clamp(renderNoise / noiseReference, kMinNoiseScale, kMaxNoiseScale);
+  else if (defaultSpp > 0 && plan.spp > 0)
+    plan.noiseScale = std::sqrt(defaultSpp / plan.spp);
   if (options.skip >= 0) {
     plan.skip = options.skip;
   } else {
@@ -45,7 +57,7 @@ SamplingPlan planSampling(const ModelInfo& info, const NoiseSchedule& schedule,
     // carried over to the schedule in use and scaled to the input's noise.
     const NoiseSchedule defaults = info.samplingSchedule();
     const double level =
-        noiseLevel(defaults, startStep(defaults, noteOr(info, "default_skip", 0))) *
+        noiseLevel(defaults, startStep(defaults, int64_t(noteOr(info, "default_skip", 0)))) *
         plan.noiseScale;
     plan.skip = maxSkipForNoise(schedule, level * (1.0 - 1e-9));  // exact default: its own skip
   }
@@ -72,6 +84,13 @@ Image tensorToImage(const torch::Tensor& tensor) {
 Denoiser::Denoiser(LoadedModel model) : model_(std::move(model)) { model_.model->eval(); }
 
 Denoiser Denoiser::fromFile(const std::string& path) { return Denoiser(loadModelFile(path)); }
+
+double Denoiser::measureNoise(const FrameBuffers& frame, double exposure) const {
+  torch::NoGradGuard noGrad;
+  const Image& color = frame.get("color");
+  return estimateNoise(modelSpaceRadiance(info(), color, exposureFor(info(), color, exposure)),
+                       frame);
+}
 
 std::vector<std::string> Denoiser::missingBuffers(const std::vector<std::string>& available) const {
   std::vector<std::string> missing;
@@ -109,8 +128,7 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   // The radiance in model space is full-frame (the sampler starts from it); the
   // aux inputs, ten times as many channels, are normalized per tile on demand.
   const double exposure = exposureFor(mi, frame.get("color"), options.exposure);
-  const torch::Tensor cond = modelSpaceFromTonemapped(
-      tonemapRadiance(imageToTensor(frame.get("color")) * exposure, curve));
+  const torch::Tensor cond = modelSpaceRadiance(mi, frame.get("color"), exposure);
   auto auxOf = [&](const TileRect& r) {
     return mi.input_buffers.empty() ? torch::Tensor()
                                     : normalizedAuxRegion(frame, mi.input_buffers, curve, r.y0,
@@ -121,7 +139,11 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
                                      ? mi.samplingSchedule()
                                      : respace(mi.trainingSchedule(), options.respacing);
   const bool regression = mi.objective == Objective::Regression;
-  const SamplingPlan plan = planSampling(mi, schedule, options, frame.samplesPerPixel);
+  // The noise is measured only where the plan uses it.
+  const bool measure = mi.notes.count("noise_reference") && options.spp <= 0 &&
+                       (options.skip < 0 || options.meanMatchSigma < 0);
+  const SamplingPlan plan = planSampling(mi, schedule, options, frame.samplesPerPixel,
+                                         measure ? estimateNoise(cond, frame) : -1.0);
   const int64_t skip = plan.skip;
   startStep(schedule, skip);  // validates skip against the step count
   const int64_t steps = regression ? 1 : schedule.size() - skip;

@@ -44,19 +44,29 @@ struct DenoiseOptions {
 };
 
 // Skip and mean matching radius for one input. A model's defaults are tuned for
-// renders at its default_spp; Monte Carlo noise falls as 1/sqrt(spp), so a
-// render with more samples starts where the forward noise level matches its
-// own (a later step) and trusts its local means at a proportionally smaller
-// radius. Explicit options win; unknown spp or a model without default_spp
-// keeps the defaults as they are.
+// renders as noisy as its tuning frames; a render with less noise starts where
+// the forward noise level matches its own (a later step) and trusts its local
+// means at a proportionally smaller radius, a noisier one the other way.
+// The render's noise relative to the tuning frames' (noiseScale) is
+//  - its measured noise (dn/noise_estimate.h) over the model's noise_reference,
+//    when the model has one and no --spp was given;
+//  - else sqrt(default_spp / spp), from the sample count (Monte Carlo noise
+//    falls as 1/sqrt(spp)), when the model has default_spp and the count is known;
+//  - else 1: the defaults as they are.
+// Explicit skip and radius win.
 struct SamplingPlan {
   int64_t skip = 0;
   double meanMatchSigma = kDefaultMeanMatchSigma;
   int spp = 0;            // the count used, 0 = unknown
-  double noiseScale = 1;  // sqrt(default_spp / spp)
+  double noise = -1;      // the render's measured noise in model space, -1 = not measured
+  double noiseScale = 1;  // the render's noise relative to the model's tuning frames
 };
+// The measured noiseScale is kept in [kMinNoiseScale, kMaxNoiseScale]: the shipped
+// model fails when sampling starts near pure noise (docs/model-card.md).
+constexpr double kMinNoiseScale = 1.0 / 64.0;
+constexpr double kMaxNoiseScale = 3.0;
 SamplingPlan planSampling(const ModelInfo& info, const NoiseSchedule& schedule,
-                          const DenoiseOptions& options, int fileSpp);
+                          const DenoiseOptions& options, int fileSpp, double renderNoise = -1);
 
 struct DenoiseResult {
   Image color;          // linear HDR, 3 channels
@@ -82,6 +92,11 @@ class Denoiser {
 
   // Throws std::invalid_argument when buffers are missing (see missingBuffers).
   DenoiseResult denoise(const FrameBuffers& frame, const DenoiseOptions& options) const;
+
+  // The frame's Monte Carlo noise in model space, at `exposure` (0: the
+  // autoexposure denoise() uses); what planSampling compares with the model's
+  // noise_reference.
+  double measureNoise(const FrameBuffers& frame, double exposure = 0.0) const;
 
  private:
   LoadedModel model_;

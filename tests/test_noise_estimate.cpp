@@ -1,0 +1,68 @@
+// The render's own noise level (dn/noise_estimate.h), against noise of known
+// standard deviation added to images with and without structure.
+#include "doctest_torch.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+
+#include "dn/denoiser.h"
+#include "dn/noise_estimate.h"
+
+using namespace dn;
+
+namespace {
+
+// A smooth image: a ramp in x and y, per channel.
+torch::Tensor ramp(int64_t h, int64_t w) {
+  auto y = torch::linspace(-0.5, 0.5, h).view({1, 1, h, 1});
+  auto x = torch::linspace(-0.3, 0.4, w).view({1, 1, 1, w});
+  return torch::cat({x + y, x - y, 0.5 * x + 0.2 * y}, 1).contiguous();
+}
+
+torch::Tensor gaussian(int64_t h, int64_t w, double std, uint64_t seed) {
+  auto generator = at::detail::createCPUGenerator(seed);
+  return torch::randn({1, 3, h, w}, generator, torch::kFloat) * std;
+}
+
+FrameBuffers frameWith(const torch::Tensor& albedo) {
+  FrameBuffers frame;
+  frame.height = static_cast<int>(albedo.size(2));
+  frame.width = static_cast<int>(albedo.size(3));
+  frame.buffers["albedo"] = tensorToImage(albedo);
+  return frame;
+}
+
+}  // namespace
+
+TEST_CASE("independent noise of a known level is measured on smooth and on tall frames") {
+  const FrameBuffers none;                          // no features: every pixel counts
+  CHECK(estimateNoise(ramp(64, 80), none) < 1e-5);  // a gradient has no noise
+  for (double std : {0.01, 0.1, 0.3}) {
+    CHECK(estimateNoise(ramp(64, 80) + gaussian(64, 80, std, 1), none) ==
+          doctest::Approx(std).epsilon(0.05));
+  }
+  // Taller than one strip of rows: strips must neither drop nor repeat rows.
+  CHECK(estimateNoise(ramp(600, 40) + gaussian(600, 40, 0.2, 2), none) ==
+        doctest::Approx(0.2).epsilon(0.03));
+  // Too small to measure.
+  CHECK(estimateNoise(torch::rand({1, 3, 2, 2}), none) == 0.0);
+}
+
+TEST_CASE("texture that the feature buffers explain is not taken for noise") {
+  // A noiseless image: flat on the left, a fine random texture on the right,
+  // the same texture in the albedo. (Straight edges need no mask: the operator
+  // does not see them.)
+  auto texture = torch::full({1, 3, 48, 48}, 0.5);
+  texture.narrow(3, 24, 24).copy_(0.5 + gaussian(48, 24, 0.2, 4));
+  const FrameBuffers flatAlbedo = frameWith(torch::full({1, 3, 48, 48}, 0.5));
+  const FrameBuffers texturedAlbedo = frameWith(texture.clone());
+  CHECK(estimateNoise(texture, flatAlbedo) > 0.1);  // unexplained: looks like noise
+  CHECK(estimateNoise(texture, texturedAlbedo) < 0.1 * estimateNoise(texture, flatAlbedo));
+
+  // With noise on top, the masked estimate is the noise alone.
+  const auto noisy = texture + gaussian(48, 48, 0.05, 3);
+  CHECK(estimateNoise(noisy, texturedAlbedo) == doctest::Approx(0.05).epsilon(0.1));
+
+  // Features with texture everywhere leave too little: every pixel counts.
+  const FrameBuffers allTextured = frameWith(0.5 + gaussian(48, 48, 0.2, 5));
+  CHECK(estimateNoise(noisy, allTextured) == doctest::Approx(estimateNoise(noisy, FrameBuffers{})));
+}
