@@ -41,10 +41,11 @@ model and sampling:
   --model FILE        model file (default: $DN_MODEL, else the shipped models/default.dnm)
   --steps N           diffusion steps of the respaced schedule (default: the model's, 27)
   --skip S            skip the S noisiest steps, starting from the noised render
-                      (default: the model's tuned value, adapted to the input's spp)
+                      (default: the model's tuned value, adapted to the noise
+                      measured on the render; docs/dndenoise.md)
   --spp N             the input's samples per pixel (default: the file's Cycles
-                      metadata, else unknown); scales the default skip and
-                      --mean-match to the render's noise level (docs/dndenoise.md)
+                      metadata); given, it scales the default skip and
+                      --mean-match instead of the measured noise
   --sampler ddpm|ddim sampler (default ddpm); --eta E for DDIM
   --seed N            random seed (default 0): same seed, same output
   --samples K         mean of K samples, plus their standard deviation as an
@@ -54,7 +55,7 @@ model and sampling:
                       the model was trained on
   --mean-match SIGMA  rescale the result so its local mean (Gaussian, SIGMA px)
                       matches the render's, which is unbiased (default 2 at the
-                      model's default spp, scaled by 1/sqrt(spp); 0 = off)
+                      model's tuning noise level, scaled with the render's; 0 = off)
 input buffers:
   --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work

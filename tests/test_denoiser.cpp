@@ -141,6 +141,13 @@ TEST_CASE("denoise measures the render's noise only when the model has a referen
   CHECK(result.plan.noise > 0.0);
   CHECK(result.plan.noise == doctest::Approx(denoiser.measureNoise(frame)));
   CHECK(result.plan.noiseScale == doctest::Approx(result.plan.noise / 0.2));
+  // Measured at the model's exposure: a forced exposure leaves the plan as it is.
+  DenoiseOptions forced;
+  forced.exposure = 3.0;
+  const auto exposed = denoiser.denoise(frame, forced);
+  CHECK(exposed.exposure == 3.0);
+  CHECK(exposed.plan.noise == result.plan.noise);
+  CHECK(exposed.plan.skip == result.plan.skip);
 }
 
 TEST_CASE("autoexposure: a brighter render gives the same result, brighter") {

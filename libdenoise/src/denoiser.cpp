@@ -139,11 +139,13 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
                                      ? mi.samplingSchedule()
                                      : respace(mi.trainingSchedule(), options.respacing);
   const bool regression = mi.objective == Objective::Regression;
-  // The noise is measured only where the plan uses it.
+  // The noise is measured only where the plan uses it, and at the model's own
+  // exposure, as its noise_reference was: --exposure changes what the network
+  // sees, not how noisy the render is.
   const bool measure = mi.notes.count("noise_reference") && options.spp <= 0 &&
                        (options.skip < 0 || options.meanMatchSigma < 0);
   const SamplingPlan plan = planSampling(mi, schedule, options, frame.samplesPerPixel,
-                                         measure ? estimateNoise(cond, frame) : -1.0);
+                                         measure ? measureNoise(frame) : -1.0);
   const int64_t skip = plan.skip;
   startStep(schedule, skip);  // validates skip against the step count
   const int64_t steps = regression ? 1 : schedule.size() - skip;

@@ -93,9 +93,9 @@ class Denoiser {
   // Throws std::invalid_argument when buffers are missing (see missingBuffers).
   DenoiseResult denoise(const FrameBuffers& frame, const DenoiseOptions& options) const;
 
-  // The frame's Monte Carlo noise in model space, at `exposure` (0: the
-  // autoexposure denoise() uses); what planSampling compares with the model's
-  // noise_reference.
+  // The frame's Monte Carlo noise in model space at `exposure` (0: the model's
+  // autoexposure), what planSampling compares with the model's noise_reference;
+  // denoise() measures at the autoexposure whatever DenoiseOptions::exposure is.
   double measureNoise(const FrameBuffers& frame, double exposure = 0.0) const;
 
  private:
