@@ -1,7 +1,7 @@
 // The Monte Carlo noise of a render, estimated from the render alone. The
 // sample count is a poor proxy for it: at 4 spp a simple, directly lit scene
-// can be as clean as a training frame at 100 spp and a room lit through a
-// window noisier than one at 1 spp. Sampling must start where the forward
+// can be as clean as a training frame at 100 spp, and at 16 spp a room lit
+// through a window as noisy as one at 4 spp. Sampling must start where the forward
 // noise covers the render's own (the trainer picks render-start timesteps the
 // same way), and local mean matching must blur enough to average it out.
 #pragma once
