@@ -61,11 +61,28 @@ TEST_CASE("matchLocalMean removes a brightness and colour bias but keeps the noi
   CHECK(torch::equal(matchLocalMean(biased, render, 0.0), biased));
 }
 
-TEST_CASE("matchLocalMean bounds the correction and survives non-finite renders") {
+TEST_CASE(
+    "matchLocalMean scales detail at most maxRatio, adds the rest of the mean, survives NaN") {
+  // The network returned a tenth of the render with some detail: the detail is
+  // scaled by the clamped ratio 4, the rest of the local mean comes as an offset.
   auto denoised = torch::full({1, 3, 8, 8}, 0.1f);
+  denoised[0][0][4][4] = 0.2f;
   auto render = torch::full({1, 3, 8, 8}, 5.0f);
-  CHECK(matchLocalMean(denoised, render, 2.0).max().item<double>() ==
-        doctest::Approx(0.4).epsilon(1e-5));  // ratio 50 clamped to 4
+  const auto matched = matchLocalMean(denoised, render, 2.0);
+  CHECK(matched[0][1].mean().item<double>() == doctest::Approx(5.0).epsilon(1e-5));
+  const double detail = (matched[0][0][4][4] - matched[0][0][0][0]).item<double>();
+  CHECK(detail > 0.0);
+  CHECK(detail <= 4.0 * 0.1 + 1e-5);
+
+  // A channel the network zeroed, where the render has light, comes back.
+  auto zeroed = torch::full({1, 3, 8, 8}, 0.3f);
+  zeroed[0][2].zero_();
+  const auto restored = matchLocalMean(zeroed, torch::full({1, 3, 8, 8}, 0.3f), 0.25);
+  CHECK(restored[0][2].min().item<double>() == doctest::Approx(0.3).epsilon(1e-4));
+  // Never negative, even where the network is far brighter than the render.
+  CHECK(matchLocalMean(torch::full({1, 3, 8, 8}, 5.0f), torch::full({1, 3, 8, 8}, 0.01f), 2.0)
+            .min()
+            .item<double>() >= 0.0);
 
   render[0][0][3][3] = std::numeric_limits<float>::quiet_NaN();
   render[0][1][4][4] = std::numeric_limits<float>::infinity();
