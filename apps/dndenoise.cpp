@@ -348,7 +348,11 @@ int run(Options o) {
     }
 
     WriteOptions write;
-    write.half = !o.floatOut;
+    // A sun or lamp above half's range (65504) would be written as Inf.
+    write.half = !o.floatOut && fitsHalf(result.color);
+    if (o.verbose && !o.floatOut && !write.half)
+      fmt::print(stderr, "dndenoise: {}: values above the half range, result written as float\n",
+                 name);
     write.rgbOnly = o.rgbOnly || input.empty();
     write.layer = layerPrefixOf(frame) + o.layer;
     if (!result.uncertainty.empty() && !write.rgbOnly)

@@ -23,9 +23,10 @@ import sys
 import bpy
 from mathutils import Vector
 
-SCENES = ("cube", "interior", "studio", "night")
+SCENES = ("cube", "interior", "studio", "night", "kitchen", "outdoor", "product")
 HDRI = "/usr/share/blender/datafiles/studiolights/world/forest.exr"
 PHOTO = "/usr/share/backgrounds/mate/nature/Wood.jpg"
+GRASS = "/usr/share/backgrounds/mate/nature/GreenMeadow.jpg"
 
 
 def parse_args():
@@ -187,6 +188,101 @@ def build_night():
     cam.location = (0.0, -9.0, 1.6)
     look_at(cam, (0.5, 2.0, 1.6))
     cam.data.lens = 30
+
+
+def build_kitchen():
+    """A kitchen corner: a ceiling panel light, a glossy counter, bowls and bottles."""
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+    tiles = material("tiles", (0.85, 0.85, 0.8), 0.35)
+    for loc, scale in [((0, 0, -0.05), (3, 3, 0.05)), ((0, 3.05, 1.5), (3, 0.05, 1.6)),
+                       ((-3.05, 0, 1.5), (0.05, 3, 1.6)), ((0, 0, 3.05), (3, 3, 0.05))]:
+        add(bpy.ops.mesh.primitive_cube_add, tiles, location=loc, scale=scale)
+    add(bpy.ops.mesh.primitive_cube_add, material("counter", (0.1, 0.1, 0.12), 0.15),
+        location=(-0.5, 2.3, 0.9), scale=(2.4, 0.6, 0.05))
+    add(bpy.ops.mesh.primitive_cube_add, material("cabinet", (0.55, 0.3, 0.15), 0.6),
+        location=(-0.5, 2.3, 0.42), scale=(2.4, 0.6, 0.42))
+    for x, color in [(-1.8, (0.9, 0.2, 0.1)), (-0.6, (0.1, 0.4, 0.9)), (0.6, (0.95, 0.85, 0.3))]:
+        bowl = add(bpy.ops.mesh.primitive_uv_sphere_add, material("bowl", color, 0.25),
+                   radius=0.25, location=(x, 2.2, 1.1))
+        bowl.scale.z = 0.5
+        smooth(bowl)
+    bottle = add(bpy.ops.mesh.primitive_cylinder_add,
+                 material("bottle", (0.3, 0.8, 0.4), roughness=0.05, transmission=1.0),
+                 radius=0.09, depth=0.5, location=(1.3, 2.3, 1.2))
+    smooth(bottle)
+    add(bpy.ops.object.light_add, type="AREA", location=(-0.5, 1.5, 2.95))
+    light = bpy.context.active_object.data
+    light.energy, light.size, light.color = 80.0, 1.2, (1.0, 0.92, 0.8)
+    add(bpy.ops.object.light_add, type="POINT", location=(2.0, -1.0, 2.0))
+    bpy.context.active_object.data.energy = 15.0
+    world_color((0.02, 0.02, 0.025), 1.0)
+    cam = bpy.data.objects["Camera"]
+    cam.location = (1.2, -0.6, 1.7)
+    look_at(cam, (-0.6, 2.2, 1.0))
+    cam.data.lens = 26
+
+
+def build_outdoor():
+    """Houses in low sun under a physical sky: long shadows, sky light, a textured ground."""
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+    add(bpy.ops.mesh.primitive_plane_add, material("ground", (1, 1, 1), 0.8, image=GRASS), size=60)
+    walls = [(0.85, 0.8, 0.7), (0.7, 0.45, 0.35), (0.9, 0.9, 0.92)]
+    for i, (x, y) in enumerate([(-4, 3), (1, 6), (5, 2), (-1, 12)]):
+        add(bpy.ops.mesh.primitive_cube_add, material("wall%d" % i, walls[i % 3], 0.7),
+            location=(x, y, 1.2), scale=(1.3, 1.5, 1.2))
+        roof = add(bpy.ops.mesh.primitive_cone_add, material("roof%d" % i, (0.4, 0.12, 0.08), 0.6),
+                   vertices=4, radius1=2.3, depth=1.2, location=(x, y, 3.0))
+        roof.rotation_euler.z = math.radians(45)
+    for x, y in [(-2, 0), (3, -1), (7, 6)]:
+        tree = add(bpy.ops.mesh.primitive_ico_sphere_add, material("leaves", (0.1, 0.35, 0.08), 0.9),
+                   radius=1.0, subdivisions=2, location=(x, y, 1.8))
+        add(bpy.ops.mesh.primitive_cylinder_add, material("bark", (0.25, 0.15, 0.08), 0.9),
+            radius=0.12, depth=1.4, location=(x, y, 0.7))
+    add(bpy.ops.object.light_add, type="SUN", location=(0, 0, 10),
+        rotation=(math.radians(75), 0, math.radians(-40)))
+    bpy.context.active_object.data.energy = 1.5
+    world = bpy.context.scene.world
+    world.use_nodes = True
+    sky = world.node_tree.nodes.new("ShaderNodeTexSky")
+    sky.sky_type = "NISHITA"
+    sky.sun_elevation = math.radians(15)
+    world.node_tree.links.new(sky.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.1
+    cam = bpy.data.objects["Camera"]
+    cam.location = (2.0, -9.0, 2.0)
+    look_at(cam, (0.0, 4.0, 1.2))
+    cam.data.lens = 28
+
+
+def build_product():
+    """A product shot: key and rim area lights on a dark sweep, glossy and rough objects."""
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+    add(bpy.ops.mesh.primitive_plane_add, material("sweep", (0.05, 0.05, 0.06), 0.4), size=20)
+    add(bpy.ops.mesh.primitive_plane_add, material("back", (0.05, 0.05, 0.06), 0.4), size=20,
+        location=(0, 6, 0), rotation=(math.radians(90), 0, 0))
+    smooth(add(bpy.ops.mesh.primitive_uv_sphere_add, material("red", (0.8, 0.05, 0.05), 0.08),
+               radius=0.7, location=(-1.2, 0.5, 0.7), segments=64, ring_count=32))
+    add(bpy.ops.mesh.primitive_cone_add, material("steel", (0.8, 0.8, 0.85), roughness=0.35,
+                                                  metallic=1.0),
+        radius1=0.6, depth=1.5, location=(0.6, 1.0, 0.75))
+    box = add(bpy.ops.mesh.primitive_cube_add, material("soap", (0.9, 0.85, 0.6), 0.5),
+              location=(1.6, -0.4, 0.35), scale=(0.5, 0.35, 0.35))
+    bevel = box.modifiers.new("bevel", "BEVEL")
+    bevel.width, bevel.segments = 0.08, 4
+    for loc, energy, size in [((-3.0, -2.5, 3.0), 500.0, 2.0), ((2.5, 3.5, 2.5), 300.0, 1.0)]:
+        add(bpy.ops.object.light_add, type="AREA", location=loc)
+        light = bpy.context.active_object
+        light.data.energy, light.data.size = energy, size
+        direction = Vector((0, 0.5, 0.6)) - light.location
+        light.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
+    world_color((0.0, 0.0, 0.0), 1.0)
+    cam = bpy.data.objects["Camera"]
+    cam.location = (0.3, -5.5, 1.8)
+    look_at(cam, (0.2, 0.5, 0.6))
+    cam.data.lens = 45
 
 
 def configure(scene, args):

@@ -296,3 +296,13 @@ TEST_CASE("non-finite values are counted and zeroed") {
   CHECK(countAndZeroNonFinite(img) == 3);
   CHECK(img.pixels == std::vector<float>{1.0f, 0.0f, 0.0f, 0.0f});
 }
+
+TEST_CASE("fitsHalf: the largest half is 65504; a sun above it needs float") {
+  Image img(2, 1, 1);
+  img.pixels = {-65504.0f, 65504.0f};
+  CHECK(fitsHalf(img));
+  img.pixels[1] = 200000.0f;  // the sun disc of Cycles' sky texture
+  CHECK_FALSE(fitsHalf(img));
+  img.pixels[1] = NAN;
+  CHECK_FALSE(fitsHalf(img));
+}

@@ -230,6 +230,18 @@ def main():
         read_rgb(p("nan_out.exr"), "ViewLayer.Denoised")).all() and "6 NaN/Inf and 3 negative values" in out.stderr,
           out.stderr)
 
+    # A sun disc above half's range (Cycles' sky texture reaches 2e5): kept, and finite.
+    for i, c in enumerate("RGB"):
+        sun = read_rgb(frame)[:, :, i].astype(np.float32)
+        sun[3:6, 3:6] = 2e5
+        ch[f"ViewLayer.Combined.{c}"] = sun
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, ch) as f:
+        f.write(p("sun.exr"))
+    out = run(base_cmd + [p("sun.exr"), "-o", p("sun_out.exr")])
+    sun_out = read_rgb(p("sun_out.exr"), "ViewLayer.Denoised")
+    check("a sun above the half range: finite output that keeps it", out.returncode == 0
+          and np.isfinite(sun_out).all() and sun_out.max() > 65504, out.stderr)
+
     write_rgb(p("rgb_only_input.exr"), np.full(nan_img.shape, 0.5, np.float32))
     expect_error("missing aux buffers", base_cmd + [p("rgb_only_input.exr"), "-o", p("x1.exr")],
                  "rgb_only_input.exr", p("x1.exr"))

@@ -378,6 +378,12 @@ std::size_t countAndZeroNonFinite(Image& image) {
   return count;
 }
 
+bool fitsHalf(const Image& image) {
+  constexpr float kHalfMax = 65504.0f;
+  return std::all_of(image.pixels.begin(), image.pixels.end(),
+                     [](float v) { return std::isfinite(v) && std::abs(v) <= kHalfMax; });
+}
+
 void writeImage(const std::string& path, const Image& image, bool half,
                 const std::vector<std::string>& channelNames) {
   if (image.empty()) fail(path, "refusing to write an empty image");

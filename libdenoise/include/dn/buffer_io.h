@@ -53,6 +53,9 @@ Image readImage(const std::string& path, int channels = 3,
 // Counts NaN/Inf values and replaces them by 0 (so metrics never silently average them).
 std::size_t countAndZeroNonFinite(Image& image);
 
+// True when every value of `image` is finite and half float holds it (|v| <= 65504).
+bool fitsHalf(const Image& image);
+
 struct WriteOptions {
   bool half = true;                          // half or float pixels for the result channels
   std::string layer = "Denoised";            // result layer name: "<layer>.R/G/B"
