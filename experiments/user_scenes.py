@@ -74,9 +74,17 @@ def smooth(obj):
     return obj
 
 
-def look_at(cam, target):
-    direction = cam.location - Vector(target)
-    cam.rotation_euler = direction.to_track_quat("Z", "Y").to_euler()
+def clear_startup_scene():
+    """Blender's startup scene without its cube and light: camera and world stay."""
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    bpy.data.objects.remove(bpy.data.objects["Light"])
+
+
+def place_camera(location, target, lens=50):
+    cam = bpy.data.objects["Camera"]
+    cam.location = location
+    cam.rotation_euler = (cam.location - Vector(target)).to_track_quat("Z", "Y").to_euler()
+    cam.data.lens = lens
 
 
 def world_color(color, strength):
@@ -115,8 +123,7 @@ def build_cube():
 
 def build_interior():
     """A closed room lit by the sun through one window: mostly indirect light."""
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    bpy.data.objects.remove(bpy.data.objects["Light"])
+    clear_startup_scene()
     wall = material("wall", (0.75, 0.72, 0.65), 0.8)
     for loc, scale in [((0, 0, -0.05), (5, 4, 0.05)), ((0, 0, 3.05), (5, 4, 0.05)),
                        ((-5.05, 0, 1.5), (0.05, 4, 1.6)), ((0, 4.05, 1.5), (5, 0.05, 1.6)),
@@ -139,16 +146,12 @@ def build_interior():
     bpy.context.active_object.data.energy = 8.0
     bpy.context.active_object.data.angle = math.radians(1.5)
     world_color((0.4, 0.55, 0.8), 1.0)
-    cam = bpy.data.objects["Camera"]
-    cam.location = (3.8, -3.3, 1.7)
-    look_at(cam, (-2.0, 1.0, 0.8))
-    cam.data.lens = 22
+    place_camera((3.8, -3.3, 1.7), (-2.0, 1.0, 0.8), lens=22)
 
 
 def build_studio():
     """Glass, metal and a textured floor under an HDRI: caustics and reflections."""
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    bpy.data.objects.remove(bpy.data.objects["Light"])
+    clear_startup_scene()
     add(bpy.ops.mesh.primitive_plane_add, material("wood", (1, 1, 1), 0.4, image=PHOTO), size=12,
         location=(0, 0, 0))
     glass = add(bpy.ops.mesh.primitive_uv_sphere_add,
@@ -162,15 +165,12 @@ def build_studio():
     add(bpy.ops.mesh.primitive_cylinder_add, material("plastic", (0.1, 0.6, 0.2), 0.5),
         location=(0.5, 1.8, 0.6), radius=0.5, depth=1.2)
     world_hdri(HDRI, 1.0)
-    cam = bpy.data.objects["Camera"]
-    cam.location = (0.5, -6.0, 2.6)
-    look_at(cam, (0.0, 0.3, 0.6))
+    place_camera((0.5, -6.0, 2.6), (0.0, 0.3, 0.6))
 
 
 def build_night():
     """A street at night: small emitters and coloured area lights, glossy ground."""
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    bpy.data.objects.remove(bpy.data.objects["Light"])
+    clear_startup_scene()
     add(bpy.ops.mesh.primitive_plane_add, material("asphalt", (0.08, 0.08, 0.09), 0.15), size=40)
     block = material("concrete", (0.5, 0.5, 0.5), 0.7)
     for x, y, h in [(-4, 4, 3), (-1, 5, 5), (2.5, 4.5, 4), (6, 5, 6), (-6, -2, 2)]:
@@ -184,16 +184,12 @@ def build_night():
         light = bpy.context.active_object.data
         light.energy, light.color, light.size = 150.0, color, 1.0
     world_color((0.01, 0.012, 0.02), 1.0)
-    cam = bpy.data.objects["Camera"]
-    cam.location = (0.0, -9.0, 1.6)
-    look_at(cam, (0.5, 2.0, 1.6))
-    cam.data.lens = 30
+    place_camera((0.0, -9.0, 1.6), (0.5, 2.0, 1.6), lens=30)
 
 
 def build_kitchen():
     """A kitchen corner: a ceiling panel light, a glossy counter, bowls and bottles."""
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    bpy.data.objects.remove(bpy.data.objects["Light"])
+    clear_startup_scene()
     tiles = material("tiles", (0.85, 0.85, 0.8), 0.35)
     for loc, scale in [((0, 0, -0.05), (3, 3, 0.05)), ((0, 3.05, 1.5), (3, 0.05, 1.6)),
                        ((-3.05, 0, 1.5), (0.05, 3, 1.6)), ((0, 0, 3.05), (3, 3, 0.05))]:
@@ -217,16 +213,12 @@ def build_kitchen():
     add(bpy.ops.object.light_add, type="POINT", location=(2.0, -1.0, 2.0))
     bpy.context.active_object.data.energy = 15.0
     world_color((0.02, 0.02, 0.025), 1.0)
-    cam = bpy.data.objects["Camera"]
-    cam.location = (1.2, -0.6, 1.7)
-    look_at(cam, (-0.6, 2.2, 1.0))
-    cam.data.lens = 26
+    place_camera((1.2, -0.6, 1.7), (-0.6, 2.2, 1.0), lens=26)
 
 
 def build_outdoor():
     """Houses in low sun under a physical sky: long shadows, sky light, a textured ground."""
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    bpy.data.objects.remove(bpy.data.objects["Light"])
+    clear_startup_scene()
     add(bpy.ops.mesh.primitive_plane_add, material("ground", (1, 1, 1), 0.8, image=GRASS), size=60)
     walls = [(0.85, 0.8, 0.7), (0.7, 0.45, 0.35), (0.9, 0.9, 0.92)]
     for i, (x, y) in enumerate([(-4, 3), (1, 6), (5, 2), (-1, 12)]):
@@ -250,16 +242,12 @@ def build_outdoor():
     sky.sun_elevation = math.radians(15)
     world.node_tree.links.new(sky.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.1
-    cam = bpy.data.objects["Camera"]
-    cam.location = (2.0, -9.0, 2.0)
-    look_at(cam, (0.0, 4.0, 1.2))
-    cam.data.lens = 28
+    place_camera((2.0, -9.0, 2.0), (0.0, 4.0, 1.2), lens=28)
 
 
 def build_product():
     """A product shot: key and rim area lights on a dark sweep, glossy and rough objects."""
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    bpy.data.objects.remove(bpy.data.objects["Light"])
+    clear_startup_scene()
     add(bpy.ops.mesh.primitive_plane_add, material("sweep", (0.05, 0.05, 0.06), 0.4), size=20)
     add(bpy.ops.mesh.primitive_plane_add, material("back", (0.05, 0.05, 0.06), 0.4), size=20,
         location=(0, 6, 0), rotation=(math.radians(90), 0, 0))
@@ -279,10 +267,7 @@ def build_product():
         direction = Vector((0, 0.5, 0.6)) - light.location
         light.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
     world_color((0.0, 0.0, 0.0), 1.0)
-    cam = bpy.data.objects["Camera"]
-    cam.location = (0.3, -5.5, 1.8)
-    look_at(cam, (0.2, 0.5, 0.6))
-    cam.data.lens = 45
+    place_camera((0.3, -5.5, 1.8), (0.2, 0.5, 0.6), lens=45)
 
 
 def configure(scene, args):
