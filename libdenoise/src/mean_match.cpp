@@ -52,16 +52,20 @@ torch::Tensor matchLocalMean(const torch::Tensor& denoised, const torch::Tensor&
   // Dark regions: ratios of near-zero means are noise. Relative to the range, so
   // the correction does not depend on the exposure of the render.
   const double epsilon = 1e-3 * rangeMax / tonemap::kHdrMax;
-  const auto target = torch::nan_to_num(render, 0.0, 0.0, 0.0).clamp(0.0, rangeMax);
-  const auto targetMean = gaussianBlur(target, sigma);
-  const auto resultMean = gaussianBlur(denoised.clamp_min(0.0), sigma);
+  torch::Tensor targetMean;
+  {  // the clamped render is not needed past its blur (4K: 100 MB a full-frame tensor)
+    const auto target = torch::nan_to_num(render, 0.0, 0.0, 0.0).clamp_(0.0, rangeMax);
+    targetMean = gaussianBlur(target, sigma);
+  }
+  auto resultMean = gaussianBlur(denoised.clamp_min(0.0), sigma);
   const auto ratio =
-      ((targetMean + epsilon) / (resultMean + epsilon)).clamp(1.0 / maxRatio, maxRatio);
+      (targetMean + epsilon).div_(resultMean + epsilon).clamp_(1.0 / maxRatio, maxRatio);
   // The ratio scales the result's detail; what it leaves of the local mean is
   // added, so the local mean is the render's everywhere. Where the ratio is
   // clamped (the network left a channel near 0 that the render has, or the
   // reverse) scaling alone left black or coloured specks.
-  return (denoised * ratio + (targetMean - resultMean * ratio)).clamp_min(0.0);
+  const auto offset = targetMean.sub_(resultMean.mul_(ratio));  // in place: two fewer frames
+  return (denoised * ratio).add_(offset).clamp_min_(0.0);
 }
 
 }  // namespace dn
