@@ -89,6 +89,21 @@ TEST_CASE(
   CHECK(torch::isfinite(matchLocalMean(denoised, render, 2.0)).all().item<bool>());
 }
 
+TEST_CASE("matchLocalMean spreads an isolated firefly instead of bringing it back") {
+  const auto flat = torch::full({1, 3, 16, 16}, 0.1f);
+  auto render = flat.clone();
+  render[0][0][8][8] = 5.0f;  // one pixel far above all its neighbours
+  const auto matched = matchLocalMean(flat, render, 0.25);
+  CHECK(matched[0][0][8][8].item<double>() < 0.5);  // no sparkle
+  CHECK(matched[0][0].sum().item<double>() ==
+        doctest::Approx(render[0][0].sum().item<double>()).epsilon(1e-3));  // its energy stays
+
+  // Two bright pixels side by side are a feature, not a firefly: kept.
+  render[0][0][8][9] = 5.0f;
+  CHECK(matchLocalMean(flat, render, 0.25)[0][0][8][8].item<double>() ==
+        doctest::Approx(5.0).epsilon(1e-3));
+}
+
 TEST_CASE("keepBlack: black where the render is black over the window, nowhere else") {
   auto render = torch::zeros({1, 3, 10, 10});
   render.narrow(3, 5, 5).fill_(0.3);  // lit right half

@@ -31,6 +31,30 @@ torch::Tensor blurAlong(const torch::Tensor& padded, const std::vector<double>& 
   return out;
 }
 
+// An isolated firefly (a pixel above all 8 of its neighbours) spread over the
+// 5x5 pixels around it: the energy stays, the single bright pixel goes. At a
+// mean matching radius under a pixel it would otherwise come back as a sparkle.
+torch::Tensor spreadIsolated(const torch::Tensor& x) {
+  namespace F = torch::nn::functional;
+  const int64_t h = x.size(2), w = x.size(3);
+  torch::Tensor excess;  // first the neighbours' maximum, then how far x exceeds it
+  {
+    const auto padded = F::pad(x, F::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReplicate));
+    for (int64_t dy = 0; dy < 3; ++dy)
+      for (int64_t dx = 0; dx < 3; ++dx) {
+        if (dy == 1 && dx == 1) continue;
+        const auto shifted = padded.narrow(2, dy, h).narrow(3, dx, w);
+        if (excess.defined())
+          torch::maximum_out(excess, excess, shifted);
+        else
+          excess = shifted.clone();
+      }
+  }
+  excess.sub_(x).neg_().clamp_min_(0.0);
+  const auto spread = F::avg_pool2d(excess, F::AvgPool2dFuncOptions(5).stride(1).padding(2));
+  return (x - excess).add_(spread);
+}
+
 }  // namespace
 
 torch::Tensor gaussianBlur(const torch::Tensor& image, double sigma) {
@@ -54,7 +78,8 @@ torch::Tensor matchLocalMean(const torch::Tensor& denoised, const torch::Tensor&
   const double epsilon = 1e-3 * rangeMax / tonemap::kHdrMax;
   torch::Tensor targetMean;
   {  // the clamped render is not needed past its blur (4K: 100 MB a full-frame tensor)
-    const auto target = torch::nan_to_num(render, 0.0, 0.0, 0.0).clamp_(0.0, rangeMax);
+    const auto target =
+        spreadIsolated(torch::nan_to_num(render, 0.0, 0.0, 0.0).clamp_(0.0, rangeMax));
     targetMean = gaussianBlur(target, sigma);
   }
   auto resultMean = gaussianBlur(denoised.clamp_min(0.0), sigma);
