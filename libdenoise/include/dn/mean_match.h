@@ -20,7 +20,9 @@ torch::Tensor gaussianBlur(const torch::Tensor& image, double sigma);
 // `denoised` (B,C,H,W, linear HDR) rescaled per channel by
 // blur(render) / blur(denoised), the ratio clamped to [1/maxRatio, maxRatio],
 // plus what the ratio leaves of blur(render) - blur(denoised) as an offset, so
-// the local mean becomes the render's; the result is kept >= 0.
+// the local mean becomes the render's; the result is kept >= 0. Isolated
+// fireflies of the render (a pixel above all 8 neighbours) are spread over 5x5
+// first, their energy kept, so a sub-pixel sigma does not bring them back.
 // The render is clamped to the model's radiance range [0, rangeMax] first, as the
 // network saw it; NaN/Inf count as 0. sigma <= 0 returns `denoised` unchanged.
 torch::Tensor matchLocalMean(const torch::Tensor& denoised, const torch::Tensor& render,
