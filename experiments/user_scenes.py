@@ -4,11 +4,12 @@ The training data comes from scenegen/'s procedural generator with adaptive
 sampling, denoising and clamping off. These scenes check dndenoise on renders
 it has never seen, made as a user makes them: Blender's default render
 settings (adaptive sampling on, indirect clamp 10, filter 1.5 px; Cycles'
-own denoiser stays off because Debian's Blender is built without OIDN), a 16:9 frame, the view layer's Denoising Data and light passes
-switched on, saved as a multilayer EXR.
+own denoiser stays off because Debian's Blender is built without OIDN), a
+16:9 frame, the view layer's Denoising Data and light passes switched on,
+saved as a multilayer EXR.
 
   blender -b --factory-startup --python experiments/user_scenes.py -- \
-      --scene interior --out DIR --res 384x216 --spp 16 64 --ref-spp 2048 --threads 2
+      --scene interior --out DIR --res 384x216 --spp 4 16 64 --ref-spp 1024 --threads 2
 
 writes DIR/<scene>_<N>spp.exr for each --spp and DIR/<scene>_ref.exr (adaptive
 sampling off, an independent seed). Files are written under a
@@ -95,14 +96,15 @@ def world_color(color, strength):
     bg.inputs["Strength"].default_value = strength
 
 
-def world_hdri(path, strength):
+def world_texture(node_type, strength):
+    """A texture node of node_type feeding the world's background; returns the node."""
     world = bpy.context.scene.world
     world.use_nodes = True
     nt = world.node_tree
-    env = nt.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(path)
-    nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    node = nt.nodes.new(node_type)
+    nt.links.new(node.outputs["Color"], nt.nodes["Background"].inputs["Color"])
     nt.nodes["Background"].inputs["Strength"].default_value = strength
+    return node
 
 
 def build_cube():
@@ -164,7 +166,7 @@ def build_studio():
     smooth(torus)
     add(bpy.ops.mesh.primitive_cylinder_add, material("plastic", (0.1, 0.6, 0.2), 0.5),
         location=(0.5, 1.8, 0.6), radius=0.5, depth=1.2)
-    world_hdri(HDRI, 1.0)
+    world_texture("ShaderNodeTexEnvironment", 1.0).image = bpy.data.images.load(HDRI)
     place_camera((0.5, -6.0, 2.6), (0.0, 0.3, 0.6))
 
 
@@ -235,13 +237,9 @@ def build_outdoor():
     add(bpy.ops.object.light_add, type="SUN", location=(0, 0, 10),
         rotation=(math.radians(75), 0, math.radians(-40)))
     bpy.context.active_object.data.energy = 1.5
-    world = bpy.context.scene.world
-    world.use_nodes = True
-    sky = world.node_tree.nodes.new("ShaderNodeTexSky")
+    sky = world_texture("ShaderNodeTexSky", 0.1)
     sky.sky_type = "NISHITA"
     sky.sun_elevation = math.radians(15)
-    world.node_tree.links.new(sky.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.1
     place_camera((2.0, -9.0, 2.0), (0.0, 4.0, 1.2), lens=28)
 
 

@@ -144,8 +144,11 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   // sees, not how noisy the render is.
   const bool measure = mi.notes.count("noise_reference") && options.spp <= 0 &&
                        (options.skip < 0 || options.meanMatchSigma < 0);
-  const SamplingPlan plan = planSampling(mi, schedule, options, frame.samplesPerPixel,
-                                         measure ? measureNoise(frame) : -1.0);
+  // At the autoexposure (the default) the network's input is what is measured.
+  const double noise = !measure                ? -1.0
+                       : options.exposure <= 0 ? estimateNoise(cond, frame)
+                                               : measureNoise(frame);
+  const SamplingPlan plan = planSampling(mi, schedule, options, frame.samplesPerPixel, noise);
   const int64_t skip = plan.skip;
   startStep(schedule, skip);  // validates skip against the step count
   const int64_t steps = regression ? 1 : schedule.size() - skip;
