@@ -15,12 +15,12 @@
 #include <unistd.h>
 
 #include "common/cli.h"
-#include "dn/buffer_io.h"
-#include "dn/dataset.h"
-#include "dn/kernel_net.h"
-#include "dn/kernel_trainer.h"
-#include "dn/model_file.h"
-#include "dn/model_inputs.h"
+#include "dn/io/buffer_io.h"
+#include "dn/data/dataset.h"
+#include "dn/nn/kernel_net.h"
+#include "dn/train/kernel_trainer.h"
+#include "dn/nn/model_file.h"
+#include "dn/infer/model_inputs.h"
 
 namespace fs = std::filesystem;
 using namespace dn;

@@ -16,8 +16,8 @@
 
 #include "common/cli.h"
 #include "common/sequence.h"
-#include "dn/buffer_io.h"
-#include "dn/denoiser.h"
+#include "dn/io/buffer_io.h"
+#include "dn/infer/denoiser.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 

@@ -12,7 +12,7 @@
 #include <set>
 
 #include "common/cli.h"
-#include "dn/buffer_io.h"
+#include "dn/io/buffer_io.h"
 #include "dn/flip.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"

@@ -19,14 +19,14 @@
 #include <thread>
 
 #include "common/cli.h"
-#include "dn/buffer_io.h"
-#include "dn/control_module.h"
-#include "dn/denoiser.h"
-#include "dn/distributed.h"
-#include "dn/model_inputs.h"
-#include "dn/sampler.h"
-#include "dn/trainer.h"
-#include "dn/training_data.h"
+#include "dn/io/buffer_io.h"
+#include "dn/nn/control_module.h"
+#include "dn/infer/denoiser.h"
+#include "dn/train/distributed.h"
+#include "dn/infer/model_inputs.h"
+#include "dn/diffusion/sampler.h"
+#include "dn/train/trainer.h"
+#include "dn/data/training_data.h"
 
 namespace fs = std::filesystem;
 using namespace dn;

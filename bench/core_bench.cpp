@@ -18,9 +18,9 @@
 #include <thread>
 #include <vector>
 
-#include "dn/control_module.h"
-#include "dn/trainer.h"
-#include "dn/unet.h"
+#include "dn/nn/control_module.h"
+#include "dn/train/trainer.h"
+#include "dn/nn/unet.h"
 
 using namespace dn;
 

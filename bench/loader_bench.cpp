@@ -6,8 +6,8 @@
 #include <cstring>
 #include <string>
 
-#include "dn/buffers.h"
-#include "dn/dataset.h"
+#include "dn/io/buffers.h"
+#include "dn/data/dataset.h"
 
 using namespace dn::data;
 

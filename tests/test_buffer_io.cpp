@@ -11,7 +11,7 @@
 
 #include <unistd.h>
 
-#include "dn/buffer_io.h"
+#include "dn/io/buffer_io.h"
 
 using namespace dn;
 namespace fs = std::filesystem;

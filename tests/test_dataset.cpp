@@ -7,8 +7,8 @@
 
 #include <unistd.h>
 
-#include "dn/buffer_io.h"
-#include "dn/dataset.h"
+#include "dn/io/buffer_io.h"
+#include "dn/data/dataset.h"
 
 using namespace dn;
 using namespace dn::data;

@@ -1,4 +1,4 @@
-// The inference pipeline (dn/denoiser.h): sampling defaults adapted to the
+// The inference pipeline (dn/infer/denoiser.h): sampling defaults adapted to the
 // input's sample count, and autoexposure.
 #include "doctest_torch.h"
 #include "tiny_models.h"
@@ -7,7 +7,7 @@
 
 #include <cmath>
 
-#include "dn/denoiser.h"
+#include "dn/infer/denoiser.h"
 
 using namespace dn;
 

@@ -7,8 +7,8 @@
 #include <cmath>
 #include <vector>
 
-#include "dn/sampler.h"
-#include "dn/schedule.h"
+#include "dn/diffusion/sampler.h"
+#include "dn/diffusion/schedule.h"
 
 using namespace dn;
 

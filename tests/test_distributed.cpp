@@ -14,9 +14,9 @@
 #include <string>
 #include <thread>
 
-#include "dn/distributed.h"
-#include "dn/model_file.h"
-#include "dn/trainer.h"
+#include "dn/train/distributed.h"
+#include "dn/nn/model_file.h"
+#include "dn/train/trainer.h"
 
 extern char** environ;
 

@@ -11,9 +11,9 @@
 
 #include <unistd.h>
 
-#include "dn/model_file.h"
-#include "dn/sampler.h"
-#include "dn/trainer.h"
+#include "dn/nn/model_file.h"
+#include "dn/diffusion/sampler.h"
+#include "dn/train/trainer.h"
 
 using namespace dn;
 namespace fs = std::filesystem;

@@ -7,9 +7,9 @@
 
 #include <cmath>
 
-#include "dn/control_module.h"
-#include "dn/nn_blocks.h"
-#include "dn/unet.h"
+#include "dn/nn/control_module.h"
+#include "dn/nn/nn_blocks.h"
+#include "dn/nn/unet.h"
 
 using namespace dn;
 

@@ -1,11 +1,11 @@
-// The render's own noise level (dn/noise_estimate.h), against noise of known
+// The render's own noise level (dn/infer/noise_estimate.h), against noise of known
 // standard deviation added to images with and without structure.
 #include "doctest_torch.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 
-#include "dn/denoiser.h"
-#include "dn/noise_estimate.h"
+#include "dn/infer/denoiser.h"
+#include "dn/infer/noise_estimate.h"
 
 using namespace dn;
 

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "dn/model_inputs.h"
-#include "dn/tiler.h"
+#include "dn/infer/model_inputs.h"
+#include "dn/infer/tiler.h"
 
 using namespace dn;
 

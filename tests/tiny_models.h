@@ -7,7 +7,7 @@
 
 #include <cstdint>
 
-#include "dn/unet.h"
+#include "dn/nn/unet.h"
 
 inline dn::UNetConfig tinyUNetConfig() {
   dn::UNetConfig config;

@@ -1,0 +1,76 @@
+// Reading render buffers from multilayer EXR (Blender/Cycles and common
+// renderer naming) or from one file per buffer, and writing results atomically.
+#pragma once
+
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "dn/io/buffers.h"
+#include "dn/image.h"
+
+namespace dn {
+
+// Every I/O failure: the message is one line, "<file>: <what is wrong>".
+class IoError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct ReadOptions {
+  // Explicit channel lists per canonical buffer, e.g.
+  // {"albedo", {"diffuse.R", "diffuse.G", "diffuse.B"}}; they win over name lookup.
+  std::map<std::string, std::vector<std::string>> overrides;
+  // Buffers to load; empty loads every canonical buffer the file has.
+  std::vector<std::string> only;
+  // Multilayer files with several view layers: the one to use ("" = the first found).
+  std::string viewLayer;
+};
+
+// Parses "albedo=diffuse.R,diffuse.G,diffuse.B" into an override entry.
+std::pair<std::string, std::vector<std::string>> parseChannelOverride(const std::string& text);
+
+// One frame from a single (usually multilayer) image file. "color" is required.
+FrameBuffers readFrame(const std::string& path, const ReadOptions& options = {});
+
+// The canonical buffers readFrame would find in the file (options.only aside),
+// in canonical order, from the header alone: no pixels are read.
+std::vector<std::string> availableBuffers(const std::string& path, const ReadOptions& options = {});
+
+// Every channel name of a file (all parts), for listings and layer lookups.
+std::vector<std::string> channelNames(const std::string& path);
+
+// One frame from one file per buffer, as oidnDenoise takes them (EXR, PFM, HDR, ...):
+// {"color": "beauty.pfm", "albedo": "alb.pfm", "normal": "nrm.pfm"}.
+FrameBuffers readSeparateFiles(const std::map<std::string, std::string>& fileForBuffer);
+
+// The first `channels` channels (or all when channels <= 0) of a plain image file,
+// or the named channels if given.
+Image readImage(const std::string& path, int channels = 3,
+                const std::vector<std::string>& channelNames = {});
+
+// Counts NaN/Inf values and replaces them by 0 (so metrics never silently average them).
+std::size_t countAndZeroNonFinite(Image& image);
+
+// True when every value of `image` is finite and half float holds it (|v| <= 65504).
+bool fitsHalf(const Image& image);
+
+struct WriteOptions {
+  bool half = true;                          // half or float pixels for the result channels
+  std::string layer = "Denoised";            // result layer name: "<layer>.R/G/B"
+  bool rgbOnly = false;                      // plain RGB file, no other layers or metadata
+  std::map<std::string, Image> extraLayers;  // more named layers, e.g. "uncertainty"
+};
+
+// Writes `result` as a named layer next to every layer and the metadata of
+// `sourcePath` (or as plain RGB). Atomic: a temporary file is renamed into place.
+// Refuses to write over `sourcePath` unless allowOverwriteSource is set.
+void writeResult(const std::string& sourcePath, const std::string& outPath, const Image& result,
+                 const WriteOptions& options, bool allowOverwriteSource = false);
+
+// Writes a plain image (EXR/PFM/HDR/PNG/...) atomically. channelNames may be empty.
+void writeImage(const std::string& path, const Image& image, bool half = false,
+                const std::vector<std::string>& channelNames = {});
+
+}  // namespace dn
