@@ -12,12 +12,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <sstream>
 #include <thread>
 
 #include "common/cli.h"
 #include "common/sequence.h"
-#include "dn/io/buffer_io.h"
 #include "dn/infer/denoiser.h"
+#include "dn/io/buffer_io.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 
@@ -61,6 +62,8 @@ input buffers:
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
   --channels BUF=C1,C2,C3  take a buffer from these channels (repeatable)
   --view-layer NAME   which view layer of a multilayer file (default: the first)
+  --buffers LIST      use only these buffers (e.g. color,albedo), to compare buffer
+                      sets (default: every buffer the model knows that the input has)
 output:
   -o, --output PATH   output file, pattern or folder (required)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
@@ -86,6 +89,7 @@ struct Options {
   std::vector<std::string> inputs;
   std::map<std::string, std::string> separateFiles;  // buffer -> file
   ReadOptions read;
+  std::vector<std::string> buffers;  // --buffers: the only buffers to use
   std::string output, model, layer = "Denoised", reference, maxErrorMetric = "l1", device = "cpu";
   double maxError = -1.0;
   bool rgbOnly = false, floatOut = false, inplace = false, verbose = false;
@@ -96,6 +100,19 @@ struct Options {
 std::string defaultModelPath() {
   if (const char* env = std::getenv("DN_MODEL"); env && *env) return env;
   return DN_DEFAULT_MODEL;
+}
+
+std::vector<std::string> splitBufferList(const std::string& text) {
+  std::vector<std::string> names;
+  std::stringstream stream(text);
+  for (std::string name; std::getline(stream, name, ',');) {
+    if (!findBufferSpec(name))
+      throw cli::UsageError("--buffers: unknown buffer '" + name + "' (see docs/dndenoise.md)");
+    names.push_back(name);
+  }
+  if (std::find(names.begin(), names.end(), "color") == names.end())
+    throw cli::UsageError("--buffers must include color");
+  return names;
 }
 
 Options parseArgs(int argc, char** argv) {
@@ -145,6 +162,8 @@ Options parseArgs(int argc, char** argv) {
       } catch (const std::invalid_argument& e) {
         throw cli::UsageError(std::string("--channels: ") + e.what());
       }
+    } else if (args.flag("--buffers")) {
+      o.buffers = splitBufferList(args.value("--buffers"));
     } else if (args.flag("--view-layer")) {
       o.read.viewLayer = args.value("--view-layer");
     } else if (args.flag("--layer")) {
@@ -257,6 +276,18 @@ void checkAgainstReference(const Options& o, const Image& result, int& status) {
 }
 
 // One line naming what the model needs when `has` lacks some of it.
+// Which of the frame's buffers the network saw, and which it had no use for.
+void reportBuffers(const std::string& name, const std::vector<std::string>& used,
+                   const std::vector<std::string>& present) {
+  std::string usedList, ignored;
+  for (const auto& b : used) usedList += (usedList.empty() ? "" : ", ") + b;
+  for (const auto& b : present)
+    if (std::find(used.begin(), used.end(), b) == used.end())
+      ignored += (ignored.empty() ? "" : ", ") + b;
+  fmt::print(stderr, "dndenoise: {}: used {}; ignored {}\n", name, usedList,
+             ignored.empty() ? "none" : ignored);
+}
+
 void checkModelInputs(const Denoiser& denoiser, const std::string& name,
                       const std::vector<std::string>& has) {
   if (denoiser.missingBuffers(has).empty()) return;
@@ -272,21 +303,33 @@ void checkModelInputs(const Denoiser& denoiser, const std::string& name,
 // Only the buffers the model reads: the file's other layers are copied from it
 // when the result is written, and holding them as float would cost 1.5 GB on a
 // 4K frame with all of Cycles' passes.
+// The names in `available` that --buffers allows (all when it is not given).
+std::vector<std::string> allowed(const Options& o, std::vector<std::string> available) {
+  if (o.buffers.empty()) return available;
+  available.erase(std::remove_if(available.begin(), available.end(),
+                                 [&](const std::string& b) {
+                                   return std::find(o.buffers.begin(), o.buffers.end(), b) ==
+                                          o.buffers.end();
+                                 }),
+                  available.end());
+  return available;
+}
+
 FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::string& input,
                        const std::string& name) {
   if (input.empty()) {
     FrameBuffers frame = readSeparateFiles(o.separateFiles);
+    for (const auto& b : frame.names())
+      if (allowed(o, {b}).empty()) frame.buffers.erase(b);
     checkModelInputs(denoiser, name, frame.names());
     return frame;
   }
   ReadOptions read = o.read;
-  const std::vector<std::string> has = availableBuffers(input, read);
+  const std::vector<std::string> has = allowed(o, availableBuffers(input, read));
   // Without a colour, readFrame says what is wrong.
   if (std::find(has.begin(), has.end(), "color") != has.end()) {
     checkModelInputs(denoiser, name, has);
-    read.only = {"color"};
-    const auto& needed = denoiser.info().input_buffers;
-    read.only.insert(read.only.end(), needed.begin(), needed.end());
+    read.only = denoiser.usableBuffers(has);
   }
   return readFrame(input, read);
 }
@@ -316,6 +359,7 @@ int run(Options o) {
     if (o.verbose) reportInputStatistics(name, frame.get("color"));
 
     DenoiseOptions options = o.denoise;
+    options.device = torch::Device(o.device);
     const auto start = Clock::now();
     if (o.verbose)
       options.progress = [&, j](double f) {
@@ -332,7 +376,16 @@ int run(Options o) {
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }
     if (o.verbose) fmt::print(stderr, "\n");
-    if (o.verbose || o.repeats > 1) {
+    if (o.verbose) reportBuffers(name, result.buffersUsed, frame.names());
+    if ((o.verbose || o.repeats > 1) && denoiser.info().base_kind == BaseKind::Oidn) {
+      std::sort(times.begin(), times.end());
+      fmt::print(stderr,
+                 "dndenoise: {}: pretrained base, exposure x{:.3g}, {} steps, {} tile(s) of {} px, "
+                 "{:.2f} s (median of {}), {:.2f} s/MPix\n",
+                 name, result.exposure, result.steps, result.tileCount, result.tileSize,
+                 times[times.size() / 2], times.size(),
+                 times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
+    } else if (o.verbose || o.repeats > 1) {
       std::sort(times.begin(), times.end());
       fmt::print(
           stderr,

@@ -19,14 +19,15 @@
 #include <thread>
 
 #include "common/cli.h"
+#include "dn/data/training_data.h"
+#include "dn/diffusion/sampler.h"
+#include "dn/infer/denoiser.h"
+#include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/nn/control_module.h"
-#include "dn/infer/denoiser.h"
+#include "dn/nn/oidn_import.h"
 #include "dn/train/distributed.h"
-#include "dn/infer/model_inputs.h"
-#include "dn/diffusion/sampler.h"
 #include "dn/train/trainer.h"
-#include "dn/data/training_data.h"
 
 namespace fs = std::filesystem;
 using namespace dn;
@@ -41,6 +42,7 @@ const char* kUsage =
        dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--default-spp N]
                         [--exposure-target Y] [--noise-reference RENDER ...] [--out FILE]
        dntrain prior --model model.dnm --out base.dnm
+       dntrain import-oidn [--lib PATH] [--variant default|small|large] --out FILE
 
 base     pretrains the pixel-space prior on clean images (the data set's ground
          truths and photographs) conditioned on a degraded copy of each.
@@ -54,6 +56,11 @@ defaults sets the sampling a model file gives dndenoise when no --steps/--skip
          in place unless --out is given. The weights are not touched.
 prior    writes the frozen prior inside a controlled model as a model of its own
          (the "no Control Module" ablation), with the same sampling defaults.
+import-oidn  converts the pretrained networks inside OIDN's core library (found in
+         the installed pyoidn unless --lib is given) into a model file: one
+         network for colour, colour + albedo, and colour + albedo + normal, with
+         the library, its version, each blob's offset and sha256 in the metadata.
+         --variant large holds OIDN's one large network, trained on clean aux.
 
 options:
   --data DIR            data set root (docs/dataset.md); training uses split 'train'
@@ -86,6 +93,9 @@ options:
                         noise_reference, and dndenoise scales skip and mean
                         matching by each render's measured noise relative to it
   --model FILE          defaults: the model file to change
+  --lib PATH            import-oidn: libOpenImageDenoise_core.so.* to read
+  --variant NAME        import-oidn: network size, default (0.92 M parameters),
+                        small (0.32 M) or large (3.85 M) (default: default)
   --val-every N         validation every N steps (default 250; 0 disables)
   --log FILE            JSON-lines log (default: OUT.log.jsonl)
   --checkpoint FILE     checkpoint path (default: OUT.ckpt)
@@ -105,7 +115,8 @@ std::atomic<bool> stopRequested{false};
 extern "C" void onSignal(int) { stopRequested = true; }
 
 struct Options {
-  std::string mode, data, base, init, out, log, checkpoint, model, respacing;
+  std::string mode, data, base, init, out, log, checkpoint, model, respacing, lib;
+  std::string variant = "default";
   std::vector<std::string> photos, noiseReference;
   std::string aux = "default", prediction = "eps";
   std::vector<int> spp = {4, 16, 64};
@@ -198,6 +209,10 @@ Options parseArgs(int argc, char** argv) {
       o.respacing = args.value("--respacing");
     else if (args.flag("--model"))
       o.model = args.value("--model");
+    else if (args.flag("--lib"))
+      o.lib = args.value("--lib");
+    else if (args.flag("--variant"))
+      o.variant = args.value("--variant");
     else if (args.flag("--val-every"))
       o.valEvery = args.intValue("--val-every");
     else if (args.flag("--log"))
@@ -243,9 +258,19 @@ Options parseArgs(int argc, char** argv) {
     if (o.model.empty() || o.out.empty()) throw cli::UsageError("prior needs --model and --out");
     return o;
   }
+  if (o.mode == "import-oidn") {
+    if (o.out.empty()) throw cli::UsageError("import-oidn needs --out FILE");
+    try {
+      oidnArchFromName(o.variant);
+    } catch (const std::invalid_argument& e) {
+      throw cli::UsageError(std::string("--variant: ") + e.what());
+    }
+    return o;
+  }
   if (o.mode != "base" && o.mode != "control" && o.mode != "regression")
     throw cli::UsageError(
-        "first argument must be base, control, regression, defaults or prior (see --help)");
+        "first argument must be base, control, regression, defaults, prior or import-oidn (see "
+        "--help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
   if (o.mode != "base" && (o.base.empty() == o.init.empty() || o.data.empty()))
     throw cli::UsageError(o.mode + " needs --data and one of --base or --init");
@@ -452,8 +477,24 @@ int extractPrior(const Options& o) {
   return cli::kExitOk;
 }
 
+// dntrain import-oidn: OIDN's pretrained networks as a model file.
+int importOidnModel(const Options& o) {
+  const std::string lib = o.lib.empty() ? findOidnLibrary() : o.lib;
+  const OidnImport imported = importOidn(lib, oidnArchFromName(o.variant));
+  saveModelFile(o.out, imported.info, *imported.base);
+  const auto& notes = imported.info.notes;
+  fmt::print(stderr, "dntrain: {}: OIDN {} ({}), {} network{}:\n", o.out,
+             notes.at("source_version"), lib, imported.info.oidn.input_sets.size(),
+             imported.info.oidn.input_sets.size() > 1 ? "s" : "");
+  for (const auto& set : imported.info.oidn.input_sets)
+    fmt::print(stderr, "  {:<12} {} at offset {}, sha256 {}\n", set, notes.at(set + ".weights"),
+               notes.at(set + ".blob_offset"), notes.at(set + ".blob_sha256"));
+  return cli::kExitOk;
+}
+
 int run(const Options& o) {
   if (o.mode == "defaults") return setDefaults(o);
+  if (o.mode == "import-oidn") return importOidnModel(o);
   if (o.mode == "prior") return extractPrior(o);
   // Debian's LibTorch starts with one thread: use every core unless told otherwise.
   torch::set_num_threads(o.threads > 0 ? o.threads

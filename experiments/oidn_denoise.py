@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """Intel Open Image Denoise 2.x (through pyoidn) on Blender multilayer EXRs.
 
-  oidn_denoise.py [--quality default|high|balanced|fast] [--threads N] IN.exr... -o OUT
-      HDR colour (the Combined pass) + Denoising Albedo + Denoising Normal, RT filter,
-      auxiliary buffers prefiltered by OIDN (they are noisy averages, not clean).
+  oidn_denoise.py [--quality default|high|balanced|fast] [--threads N]
+                  [--aux albedo,normal|albedo|none] IN.exr... -o OUT
+      HDR colour (the Combined pass) + Denoising Albedo + Denoising Normal, RT filter
+      (noisy auxiliary buffers, as rendered). --aux gives OIDN fewer buffers:
+      colour + albedo, or colour alone, and OIDN picks its network for that set.
       OUT is a file for one input, or a folder (ending in /) for several: the
       results keep the inputs' file names. Each result is plain float32 RGB.
 """
@@ -51,10 +53,14 @@ class Denoiser:
         if error:
             raise RuntimeError(f"OIDN {what} failed: {error}")
 
-    def run(self, color, albedo, normal):
+    def run(self, color, albedo, normal, aux=("albedo", "normal")):
         output = np.empty_like(color)
-        for name, image in (("color", color), ("albedo", albedo), ("normal", normal), ("output", output)):
-            self.filter.set_image(name, image, OIDN_FORMAT_FLOAT3)
+        images = {"color": color, "albedo": albedo, "normal": normal}
+        for name in ("albedo", "normal"):
+            if name not in aux:
+                self.filter.unset_image(name)
+        for name in ["color"] + list(aux) + ["output"]:
+            self.filter.set_image(name, output if name == "output" else images[name], OIDN_FORMAT_FLOAT3)
         self.filter.commit()
         self.filter.execute()
         self.check("filter execution")
@@ -75,6 +81,8 @@ def main():
     parser.add_argument("-o", "--output", required=True)
     parser.add_argument("--quality", choices=sorted(QUALITIES), default="default")
     parser.add_argument("--threads", type=int, default=0, help="0: all cores (OIDN's default)")
+    parser.add_argument("--aux", choices=["albedo,normal", "albedo", "none"], default="albedo,normal",
+                        help="auxiliary buffers given to OIDN (default: albedo,normal)")
     args = parser.parse_args()
     outputs = output_paths(args.inputs, args.output)
     denoiser = Denoiser(args.quality, args.threads)
@@ -82,7 +90,8 @@ def main():
         if os.path.abspath(source) == os.path.abspath(target):
             fail(f"oidn_denoise: {target}: the output would replace the input")
         try:
-            write_rgb(target, denoiser.run(*load_buffers(source)))
+            aux = () if args.aux == "none" else tuple(args.aux.split(","))
+            write_rgb(target, denoiser.run(*load_buffers(source), aux=aux))
         except (ExrError, RuntimeError) as error:
             fail(f"oidn_denoise: {error}")
 

@@ -1,6 +1,7 @@
 #include "dn/tonemap.h"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
@@ -33,6 +34,60 @@ float srgbEncode(float v) {
 float srgbDecode(float e) {
   e = nonNegative(e);
   return e <= 0.04045f ? e / 12.92f : std::pow((e + 0.055f) / 1.055f, 2.4f);
+}
+
+namespace {
+// The PU curve's pieces: a * y below y0, b * y^c + d below y1, e * log(y + f) + g above.
+constexpr float kPuA = 1.41283765e+03f, kPuB = 1.64593172e+00f, kPuC = 4.31384981e-01f,
+                kPuD = -2.94139609e-03f, kPuE = 1.92653254e-01f, kPuF = 6.26026094e-03f,
+                kPuG = 9.98620152e-01f, kPuY0 = 1.57945760e-06f, kPuY1 = 3.22087631e-02f,
+                kPuX0 = 2.23151711e-03f, kPuX1 = 3.70974749e-01f;
+constexpr float kHalfMax = 65504.0f;
+
+float puUnscaled(float y) {
+  if (y <= kPuY0) return kPuA * y;
+  if (y <= kPuY1) return kPuB * std::pow(y, kPuC) + kPuD;
+  return kPuE * std::log(y + kPuF) + kPuG;
+}
+
+float puUnscaledInverse(float x) {
+  if (x <= kPuX0) return x / kPuA;
+  if (x <= kPuX1) return std::pow((x - kPuD) / kPuB, 1.0f / kPuC);
+  return std::exp((x - kPuG) / kPuE) - kPuF;
+}
+
+const float kPuNorm = puUnscaled(kHalfMax);
+}  // namespace
+
+float pu(float v) { return puUnscaled(v) / kPuNorm; }
+float puInverse(float t) { return puUnscaledInverse(t * kPuNorm); }
+
+float oidnExposure(const Image& color) {
+  constexpr int kBin = 16;
+  const int binsY = (color.height + kBin - 1) / kBin, binsX = (color.width + kBin - 1) / kBin;
+  double logSum = 0.0;
+  int count = 0;
+  for (int by = 0; by < binsY; ++by)
+    for (int bx = 0; bx < binsX; ++bx) {
+      const int y0 = by * color.height / binsY, y1 = (by + 1) * color.height / binsY;
+      const int x0 = bx * color.width / binsX, x1 = (bx + 1) * color.width / binsX;
+      float sum = 0.0f;
+      for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+          const float* p = color.pixel(x, y);
+          auto clean = [](float v) {
+            return std::isfinite(v) ? std::max(v, 0.0f) : (v > 0 ? FLT_MAX : 0.0f);
+          };
+          const float g = color.channels >= 3 ? p[1] : p[0], b = color.channels >= 3 ? p[2] : p[0];
+          sum += 0.212671f * clean(p[0]) + 0.715160f * clean(g) + 0.072169f * clean(b);
+        }
+      const float mean = sum / float((y1 - y0) * (x1 - x0));
+      if (mean > 1e-8f) {
+        logSum += std::log2(mean);
+        ++count;
+      }
+    }
+  return count > 0 ? float(0.18 / std::exp2(logSum / count)) : 1.0f;
 }
 
 float apply(Curve curve, float v) {

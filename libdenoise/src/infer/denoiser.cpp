@@ -81,7 +81,14 @@ Image tensorToImage(const torch::Tensor& tensor) {
   return image;
 }
 
-Denoiser::Denoiser(LoadedModel model) : model_(std::move(model)) { model_.model->eval(); }
+Denoiser::Denoiser(LoadedModel model) : model_(std::move(model)) {
+  if (model_.oidn) {
+    model_.oidn->eval();
+    model_.oidn->useChannelsLast();
+  } else {
+    model_.model->eval();
+  }
+}
 
 Denoiser Denoiser::fromFile(const std::string& path) { return Denoiser(loadModelFile(path)); }
 
@@ -93,6 +100,9 @@ double Denoiser::measureNoise(const FrameBuffers& frame, double exposure) const 
 }
 
 std::vector<std::string> Denoiser::missingBuffers(const std::vector<std::string>& available) const {
+  if (info().base_kind == BaseKind::Oidn)
+    return model_.oidn->pick(available).second ? std::vector<std::string>{}
+                                               : std::vector<std::string>{"color"};
   std::vector<std::string> missing;
   for (const auto& name : info().input_buffers)
     if (std::find(available.begin(), available.end(), name) == available.end())
@@ -100,7 +110,23 @@ std::vector<std::string> Denoiser::missingBuffers(const std::vector<std::string>
   return missing;
 }
 
+std::vector<std::string> Denoiser::usableBuffers(const std::vector<std::string>& available) const {
+  if (info().base_kind == BaseKind::Oidn) {
+    const OidnInputSet* set = model_.oidn->pick(available).second;
+    return set ? set->buffers : std::vector<std::string>{};
+  }
+  std::vector<std::string> usable = {"color"};
+  usable.insert(usable.end(), info().input_buffers.begin(), info().input_buffers.end());
+  return usable;
+}
+
 double Denoiser::bytesPerPixel() const {
+  if (info().base_kind == BaseKind::Oidn) {
+    double most = 0;
+    for (const auto& set : info().oidn.input_sets)
+      most = std::max(most, oidnBytesPerPixel(model_.oidn->net(set)->config()));
+    return most;
+  }
   // Skip features live until the decoder uses them; a few full-width tensors
   // are alive at once in a block; the control copy doubles the encoder.
   const UNetConfig& c = info().base;
@@ -121,6 +147,9 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
     throw std::invalid_argument("model needs buffers the input lacks: " + list);
   }
   if (options.samples < 1) throw std::invalid_argument("samples must be at least 1");
+  if (info().base_kind == BaseKind::Oidn) return denoiseWithBase(frame, options);
+  if (!options.device.is_cpu())
+    throw std::invalid_argument("this diffusion model runs on the CPU only (use --device cpu)");
   torch::NoGradGuard noGrad;
   const ModelInfo& mi = info();
   const tonemap::Curve curve = tonemap::curveFromName(mi.tonemap);
@@ -216,6 +245,29 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   result.steps = steps;
   result.tileSize = std::min<int64_t>(tile, std::max(frame.width, frame.height));
   result.tileCount = tiler.tiles().size();
+  result.buffersUsed = usableBuffers(frame.names());
+  return result;
+}
+
+DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
+                                        const DenoiseOptions& options) const {
+  c10::InferenceMode inference;
+  auto [net, set] = model_.oidn->pick(frame.names());
+  net->to(options.device);
+  OidnRunOptions run;
+  run.device = options.device;
+  run.exposure = static_cast<float>(options.exposure);
+  run.tile = options.tile;
+  run.maxMemoryBytes = options.maxMemoryBytes;
+  run.progress = options.progress;
+  OidnRunResult out = runOidn(net, *set, frame, run);
+  DenoiseResult result;
+  result.color = tensorToImage(out.radiance);
+  result.exposure = out.exposure;
+  result.steps = 1;
+  result.tileSize = out.tileSize;
+  result.tileCount = out.tileCount;
+  result.buffersUsed = set->buffers;
   return result;
 }
 

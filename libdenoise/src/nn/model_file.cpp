@@ -163,47 +163,33 @@ std::vector<std::string> splitList(const std::string& text) {
   return items;
 }
 
-std::string modelInfoToText(const ModelInfo& info) {
+namespace {
+
+std::string oidnInfoToText(const ModelInfo& info) {
   std::ostringstream out;
-  const auto& b = info.base;
-  out << "base.in_channels=" << b.in_channels << "\n"
-      << "base.cond_channels=" << b.cond_channels << "\n"
-      << "base.out_channels=" << b.out_channels << "\n"
-      << "base.base_channels=" << b.base_channels << "\n"
-      << "base.channel_mults=" << joinInts(b.channel_mults) << "\n"
-      << "base.res_blocks=" << b.res_blocks << "\n"
-      << "base.attention_levels=" << joinInts(b.attention_levels) << "\n"
-      << "base.middle_attention=" << (b.middle_attention ? 1 : 0) << "\n"
-      << "base.head_channels=" << b.head_channels << "\n"
-      << "base.norm_groups=" << b.norm_groups << "\n"
-      << "control=" << (info.has_control ? 1 : 0) << "\n";
-  if (info.has_control) {
-    const auto& c = info.control;
-    out << "control.aux_channels=" << c.aux_channels << "\n"
-        << "control.radiance_channels=" << c.radiance_channels << "\n"
-        << "control.hint_channels=" << c.hint_channels << "\n"
-        << "control.hint_layers=" << c.hint_layers << "\n";
-  }
-  out << "input_buffers=" << joinStrings(info.input_buffers) << "\n"
-      << "tonemap=" << info.tonemap << "\n";
-  // Written only when not the default, so diffusion files stay as they were.
-  if (info.objective == Objective::Regression) out << "objective=regression\n";
-  out << "prediction=" << predictionName(info.prediction) << "\n"
-      << "schedule=" << scheduleKindName(info.schedule) << "\n"
-      << "schedule_steps=" << info.schedule_steps << "\n"
-      << "respacing=" << info.respacing << "\n";
-  for (const auto& [key, value] : info.notes) {
-    if (value.find('\n') != std::string::npos || key.find('=') != std::string::npos)
-      throw std::invalid_argument("model note '" + key +
-                                  "' must be one line without '=' in its key");
-    out << "note." << key << "=" << value << "\n";
-  }
+  out << "base=oidn\n"
+      << "oidn.arch=" << oidnArchName(info.oidn.arch) << "\n"
+      << "oidn.input_sets=" << joinStrings(info.oidn.input_sets) << "\n"
+      << "input_buffers=" << joinStrings(info.input_buffers) << "\n";
   return out.str();
 }
 
-ModelInfo modelInfoFromText(const std::string& text, const std::string& source) {
-  KeyValues kv(text, source);
-  ModelInfo info;
+void oidnInfoFromText(const KeyValues& kv, ModelInfo& info) {
+  info.base_kind = BaseKind::Oidn;
+  try {
+    info.oidn.arch = oidnArchFromName(kv.text("oidn.arch"));
+    info.oidn.input_sets = splitList(kv.text("oidn.input_sets"));
+    if (info.oidn.input_sets.empty()) throw std::invalid_argument("oidn.input_sets is empty");
+    for (const auto& set : info.oidn.input_sets) oidnInputSet(set);
+  } catch (const std::invalid_argument& error) {
+    kv.fail(error.what());
+  }
+  info.input_buffers = splitList(kv.text("input_buffers"));
+  info.has_control = false;
+  info.objective = Objective::Regression;
+}
+
+void diffusionInfoFromText(const KeyValues& kv, ModelInfo& info) {
   auto& b = info.base;
   b.in_channels = kv.integer("base.in_channels");
   b.cond_channels = kv.integer("base.cond_channels");
@@ -244,12 +230,74 @@ ModelInfo modelInfoFromText(const std::string& text, const std::string& source) 
   } catch (const std::invalid_argument& error) {
     kv.fail(error.what());
   }
+}
+
+void notesToText(const ModelInfo& info, std::ostream& out) {
+  for (const auto& [key, value] : info.notes) {
+    if (value.find('\n') != std::string::npos || key.find('=') != std::string::npos)
+      throw std::invalid_argument("model note '" + key +
+                                  "' must be one line without '=' in its key");
+    out << "note." << key << "=" << value << "\n";
+  }
+}
+
+}  // namespace
+
+std::string modelInfoToText(const ModelInfo& info) {
+  std::ostringstream out;
+  if (info.base_kind == BaseKind::Oidn) {
+    out << oidnInfoToText(info);
+    notesToText(info, out);
+    return out.str();
+  }
+  const auto& b = info.base;
+  out << "base.in_channels=" << b.in_channels << "\n"
+      << "base.cond_channels=" << b.cond_channels << "\n"
+      << "base.out_channels=" << b.out_channels << "\n"
+      << "base.base_channels=" << b.base_channels << "\n"
+      << "base.channel_mults=" << joinInts(b.channel_mults) << "\n"
+      << "base.res_blocks=" << b.res_blocks << "\n"
+      << "base.attention_levels=" << joinInts(b.attention_levels) << "\n"
+      << "base.middle_attention=" << (b.middle_attention ? 1 : 0) << "\n"
+      << "base.head_channels=" << b.head_channels << "\n"
+      << "base.norm_groups=" << b.norm_groups << "\n"
+      << "control=" << (info.has_control ? 1 : 0) << "\n";
+  if (info.has_control) {
+    const auto& c = info.control;
+    out << "control.aux_channels=" << c.aux_channels << "\n"
+        << "control.radiance_channels=" << c.radiance_channels << "\n"
+        << "control.hint_channels=" << c.hint_channels << "\n"
+        << "control.hint_layers=" << c.hint_layers << "\n";
+  }
+  out << "input_buffers=" << joinStrings(info.input_buffers) << "\n"
+      << "tonemap=" << info.tonemap << "\n";
+  // Written only when not the default, so diffusion files stay as they were.
+  if (info.objective == Objective::Regression) out << "objective=regression\n";
+  out << "prediction=" << predictionName(info.prediction) << "\n"
+      << "schedule=" << scheduleKindName(info.schedule) << "\n"
+      << "schedule_steps=" << info.schedule_steps << "\n"
+      << "respacing=" << info.respacing << "\n";
+  notesToText(info, out);
+  return out.str();
+}
+
+ModelInfo modelInfoFromText(const std::string& text, const std::string& source) {
+  KeyValues kv(text, source);
+  ModelInfo info;
+  if (kv.has("base")) {
+    if (kv.text("base") != "oidn") kv.fail("unknown base '" + kv.text("base") + "'");
+    oidnInfoFromText(kv, info);
+  } else {
+    diffusionInfoFromText(kv, info);
+  }
   for (const auto& [key, value] : kv.all())
     if (key.rfind("note.", 0) == 0) info.notes[key.substr(5)] = value;
   return info;
 }
 
 std::shared_ptr<ConditionalDenoiser> buildDenoiser(const ModelInfo& info) {
+  if (info.base_kind != BaseKind::DiffusionUNet)
+    throw std::invalid_argument("not a diffusion model (base=oidn)");
   auto base = std::make_shared<UNet>(info.base);
   if (info.has_control) return std::make_shared<ControlledDenoiser>(base, info.control);
   return std::make_shared<PriorDenoiser>(base);
@@ -342,8 +390,7 @@ void loadModuleWeights(torch::nn::Module& module, torch::serialize::InputArchive
   check(module.named_buffers());
 }
 
-void saveModelFile(const std::string& path, const ModelInfo& info,
-                   const ConditionalDenoiser& model) {
+void saveModelFile(const std::string& path, const ModelInfo& info, const torch::nn::Module& model) {
   torch::serialize::OutputArchive archive;
   model.save(archive);
   writeArchiveFile(path, "model", modelInfoToText(info), archive);
@@ -353,6 +400,12 @@ LoadedModel loadModelFile(const std::string& path) {
   auto file = readArchiveFile(path, "model");
   LoadedModel loaded;
   loaded.info = modelInfoFromText(file.text, path);
+  if (loaded.info.base_kind == BaseKind::Oidn) {
+    loaded.oidn = OidnBase(loaded.info.oidn.arch, loaded.info.oidn.input_sets);
+    loadModuleWeights(*loaded.oidn, file.archive, path);
+    loaded.oidn->eval();
+    return loaded;
+  }
   loaded.model = buildDenoiser(loaded.info);
   loadModuleWeights(*loaded.model, file.archive, path);
   loaded.model->eval();

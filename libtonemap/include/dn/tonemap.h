@@ -23,6 +23,11 @@ float reinhard(float v);
 float reinhardInverse(float t);
 float srgbEncode(float linear);
 float srgbDecode(float encoded);
+// OIDN's HDR transfer function: a perceptually uniform encoding (a linear toe,
+// a power segment, then a log) scaled so that half's largest value, 65504,
+// maps to 1. The pretrained base (dn/nn/oidn_unet.h) works in this range.
+float pu(float v);
+float puInverse(float t);
 
 float apply(Curve curve, float v);
 float applyInverse(Curve curve, float t);
@@ -39,6 +44,11 @@ void clamp(Image& image, float lo, float hi);
 // [1 / maxScale, maxScale]; 1 for an image with no light.
 double exposureForMean(const Image& image, double target, double ceiling = kHdrMax,
                        double maxScale = 64.0);
+
+// OIDN's autoexposure: 0.18 over the geometric mean of the mean luminance of
+// 16x16-pixel bins (bins of luminance at most 1e-8 left out; NaN and negatives
+// count as 0); 1 when every bin is dark. Scales HDR radiance before pu().
+float oidnExposure(const Image& color);
 
 // "gamma", "log", "reinhard", "srgb", "linear"; throws std::invalid_argument.
 Curve curveFromName(const std::string& name);

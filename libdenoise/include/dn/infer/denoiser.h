@@ -9,10 +9,11 @@
 #include <string>
 #include <vector>
 
-#include "dn/io/buffers.h"
-#include "dn/image.h"
-#include "dn/nn/model_file.h"
 #include "dn/diffusion/sampler.h"
+#include "dn/image.h"
+#include "dn/infer/oidn_filter.h"
+#include "dn/io/buffers.h"
+#include "dn/nn/model_file.h"
 
 namespace dn {
 
@@ -40,6 +41,9 @@ struct DenoiseOptions {
   int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes, at most 256
   int64_t overlap = 32;  // tile overlap in pixels
   double maxMemoryBytes = 3.0e9;
+  // Where the network runs. CUDA runs the pretrained base (BaseKind::Oidn);
+  // the diffusion models run on the CPU only (std::invalid_argument otherwise).
+  torch::Device device = torch::kCPU;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };
 
@@ -76,6 +80,7 @@ struct DenoiseResult {
   int64_t steps = 0;    // network evaluations per sample
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
+  std::vector<std::string> buffersUsed;  // the input buffers the network saw
 };
 
 class Denoiser {
@@ -87,6 +92,8 @@ class Denoiser {
   // Buffers the model needs that are not among `available` (empty: ready to
   // denoise); `available` as FrameBuffers::names() or dn::availableBuffers give it.
   std::vector<std::string> missingBuffers(const std::vector<std::string>& available) const;
+  // The buffers the model would use from `available`, colour first.
+  std::vector<std::string> usableBuffers(const std::vector<std::string>& available) const;
   // Estimated activation bytes per pixel of one network evaluation (for tiling).
   double bytesPerPixel() const;
 
@@ -99,6 +106,8 @@ class Denoiser {
   double measureNoise(const FrameBuffers& frame, double exposure = 0.0) const;
 
  private:
+  DenoiseResult denoiseWithBase(const FrameBuffers& frame, const DenoiseOptions& options) const;
+
   LoadedModel model_;
 };
 

@@ -13,9 +13,10 @@
 
 #include <torch/torch.h>
 
-#include "dn/nn/control_module.h"
-#include "dn/nn/prior.h"
 #include "dn/diffusion/schedule.h"
+#include "dn/nn/control_module.h"
+#include "dn/nn/oidn_unet.h"
+#include "dn/nn/prior.h"
 #include "dn/nn/unet.h"
 
 namespace dn {
@@ -32,8 +33,19 @@ constexpr int kModelFormatVersion = 1;
 // ablation that tells whether diffusion earns its cost).
 enum class Objective { Diffusion, Regression };
 
+// What a model file's network is: the project's diffusion UNet with its
+// Control Module, or OIDN's pretrained UNets (one per input set), run once.
+enum class BaseKind { DiffusionUNet, Oidn };
+
+struct OidnBaseInfo {
+  OidnArch arch = OidnArch::Default;
+  std::vector<std::string> input_sets = {"hdr_alb_nrm"};
+};
+
 struct ModelInfo {
-  UNetConfig base;
+  BaseKind base_kind = BaseKind::DiffusionUNet;
+  OidnBaseInfo oidn;        // base_kind == Oidn
+  UNetConfig base;          // base_kind == DiffusionUNet
   bool has_control = true;  // false: the base prior alone (pretraining, ablations)
   ControlConfig control;
   std::vector<std::string> input_buffers;  // canonical buffer names feeding aux, in order
@@ -58,19 +70,20 @@ std::string modelInfoToText(const ModelInfo& info);
 // `source` names the file in error messages; throws ModelError.
 ModelInfo modelInfoFromText(const std::string& text, const std::string& source);
 
-// A denoiser with fresh weights for `info` (throws std::invalid_argument on a bad config).
+// A denoiser with fresh weights for `info` (throws std::invalid_argument on a
+// bad config, or when `info` is not a diffusion model).
 std::shared_ptr<ConditionalDenoiser> buildDenoiser(const ModelInfo& info);
 
 struct LoadedModel {
   ModelInfo info;
-  std::shared_ptr<ConditionalDenoiser> model;
+  std::shared_ptr<ConditionalDenoiser> model;  // base_kind == DiffusionUNet
+  OidnBase oidn{nullptr};                      // base_kind == Oidn
   // The base prior inside `model` (to freeze under a new Control Module).
   std::shared_ptr<DenoisingPrior> prior() const;
 };
 
 // Atomic: writes a temporary file next to `path`, then renames it.
-void saveModelFile(const std::string& path, const ModelInfo& info,
-                   const ConditionalDenoiser& model);
+void saveModelFile(const std::string& path, const ModelInfo& info, const torch::nn::Module& model);
 LoadedModel loadModelFile(const std::string& path);
 
 // The container under model files and training checkpoints: `kind` tags what it

@@ -1,0 +1,57 @@
+// The pretrained base run as OIDN runs it on HDR colour (+ albedo + normal):
+// the colour scaled by OIDN's autoexposure and encoded with its PU transfer
+// function, albedo clamped to [0, 1], normals clamped to [-1, 1] and mapped to
+// [0, 1], NaN as 0; the frame zero-padded to a multiple of 16; the output
+// clamped at 0, decoded and scaled back. Large frames run in overlapping tiles.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "dn/infer/tiler.h"
+#include "dn/io/buffers.h"
+#include "dn/nn/oidn_unet.h"
+
+namespace dn {
+
+// OIDN's tile overlap for its default and small networks (receptive field 174
+// px: half of it, rounded up to the alignment), and for the large one (202 px).
+constexpr int64_t kOidnOverlap = 96;
+constexpr int64_t kOidnOverlapLarge = 112;
+// OIDN splits frames above 2160x2160 pixels into tiles even without a memory bound.
+constexpr int64_t kOidnMaxTilePixels = 2160 * 2160;
+
+// (1, 3 * buffers, h, w) network input for a region of `frame`, with the
+// colour multiplied by `exposure`.
+torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
+                        const TileRect& region);
+// Network output (1, 3, h, w) -> linear HDR radiance in the frame's units.
+torch::Tensor oidnOutputToRadiance(const torch::Tensor& output, float exposure);
+
+struct OidnRunOptions {
+  float exposure = 0.0f;          // 0: OIDN's autoexposure
+  int64_t tile = 0;               // 0: the whole frame up to kOidnMaxTilePixels, or
+  double maxMemoryBytes = 3.0e9;  //    the largest tile under this budget
+  torch::Device device = torch::kCPU;
+  std::function<void(double)> progress;  // 0..1 after every tile
+};
+
+struct OidnRunResult {
+  torch::Tensor radiance;  // (1, 3, H, W) on the CPU
+  float exposure = 1.0f;
+  int64_t tileSize = 0;
+  std::size_t tileCount = 0;
+};
+
+// Denoises `frame` with `net`, whose inputs are `set`'s buffers.
+OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers& frame,
+                      const OidnRunOptions& options);
+
+// Activation bytes per pixel of one forward pass of `config`, for tiling.
+double oidnBytesPerPixel(const OidnUNetConfig& config);
+
+}  // namespace dn

@@ -1,0 +1,99 @@
+// OIDN's RT denoising UNet in LibTorch, with OIDN's tensor names
+// ("enc_conv0.weight", ...), so the weights of libOpenImageDenoise load as
+// they are (dntrain import-oidn). Three sizes, as OIDN ships them: the default
+// (5 levels, 32..112 channels), small (32..64 channels) and large (64..256).
+// Every convolution is 3x3 with ReLU, pooling is 2x2 max, upsampling 2x nearest;
+// the decoder concatenates the pooled encoder features and, last, the input.
+// Inputs must be multiples of kOidnAlignment in height and width.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "dn/nn/prior.h"
+
+namespace dn {
+
+constexpr int64_t kOidnAlignment = 16;
+
+enum class OidnArch { Default, Small, Large };
+const char* oidnArchName(OidnArch arch);
+OidnArch oidnArchFromName(const std::string& name);  // throws std::invalid_argument
+
+struct OidnUNetConfig {
+  OidnArch arch = OidnArch::Default;
+  int64_t in_channels = 9;  // 3 colour, + 3 albedo, + 3 normal
+  int64_t out_channels = 3;
+};
+
+// One convolution of the network: its OIDN name and channel counts.
+struct OidnConv {
+  std::string name;
+  int64_t in, out;
+};
+// Every convolution of `config`, in the order the network runs them.
+std::vector<OidnConv> oidnConvs(const OidnUNetConfig& config);
+
+class OidnUNetImpl : public torch::nn::Module {
+ public:
+  explicit OidnUNetImpl(const OidnUNetConfig& config);
+
+  // (B, in_channels, H, W) in OIDN's input space -> (B, out_channels, H, W).
+  // `residuals`, when given, are added to the decoder's skip inputs (the pooled
+  // encoder features, coarse to fine, then the input itself) and to the
+  // bottleneck output: where a Control Module steers the network.
+  torch::Tensor forward(const torch::Tensor& input, const ControlResiduals* residuals = nullptr);
+
+  // Channels of the decoder's skip inputs (coarse to fine, the input last) and
+  // of the bottleneck output: the shapes ControlResiduals must have.
+  std::vector<int64_t> skipChannels() const;
+  int64_t bottleneckChannels() const;
+
+  const OidnUNetConfig& config() const { return config_; }
+
+ private:
+  torch::Tensor conv(const std::string& name, const torch::Tensor& x);
+
+  OidnUNetConfig config_;
+  std::vector<std::vector<std::string>> encoder_;  // per level, pooled after the last
+  std::vector<std::string> bottleneck_;            // at the coarsest level
+  std::vector<std::vector<std::string>> decoder_;  // per level, after upsampling and concat
+  std::map<std::string, torch::nn::Conv2d> convs_;
+};
+TORCH_MODULE(OidnUNet);
+
+// OIDN's HDR input sets, named as OIDN names its weights: colour alone ("hdr"),
+// + albedo ("hdr_alb"), + albedo + normal ("hdr_alb_nrm").
+struct OidnInputSet {
+  std::string name;
+  std::vector<std::string> buffers;  // canonical buffer names, colour first
+  int64_t channels() const { return 3 * static_cast<int64_t>(buffers.size()); }
+};
+const std::vector<OidnInputSet>& oidnInputSets();
+const OidnInputSet& oidnInputSet(const std::string& name);  // throws std::invalid_argument
+
+// The pretrained base: one network per input set, all of one size, as OIDN
+// picks its weights by the buffers it is given.
+class OidnBaseImpl : public torch::nn::Module {
+ public:
+  OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets);
+
+  // The network for the richest set whose buffers are all in `available`, and
+  // its set; nullptr when none fits (no colour).
+  std::pair<OidnUNet, const OidnInputSet*> pick(const std::vector<std::string>& available) const;
+  OidnUNet net(const std::string& inputSet) const;  // throws std::out_of_range
+  const std::vector<std::string>& inputSets() const { return sets_; }
+  // Weights in channels-last order: faster convolutions on the CPU.
+  void useChannelsLast();
+
+ private:
+  std::vector<std::string> sets_;
+  std::map<std::string, OidnUNet> nets_;
+};
+TORCH_MODULE(OidnBase);
+
+}  // namespace dn

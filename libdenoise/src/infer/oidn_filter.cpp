@@ -1,0 +1,108 @@
+#include "dn/infer/oidn_filter.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "dn/tonemap.h"
+
+namespace dn {
+namespace {
+
+float nanToZero(float v) { return std::isnan(v) ? 0.0f : v; }
+
+// Fills `count` channels of `out` (planar, h x w) from a 3- or 1-channel image.
+template <typename Transform>
+void fillPlanes(const Image& image, const TileRect& r, float* out, Transform transform) {
+  const int64_t plane = r.height * r.width;
+  for (int64_t y = 0; y < r.height; ++y)
+    for (int64_t x = 0; x < r.width; ++x) {
+      const float* p = image.pixel(int(r.x0 + x), int(r.y0 + y));
+      for (int c = 0; c < 3; ++c) {
+        const float v = nanToZero(p[image.channels >= 3 ? c : 0]);
+        out[c * plane + y * r.width + x] = transform(v);
+      }
+    }
+}
+
+}  // namespace
+
+torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
+                        const TileRect& r) {
+  auto input = torch::empty({1, set.channels(), r.height, r.width});
+  float* data = input.data_ptr<float>();
+  const int64_t plane = r.height * r.width;
+  for (size_t b = 0; b < set.buffers.size(); ++b) {
+    const std::string& name = set.buffers[b];
+    float* out = data + 3 * b * plane;
+    if (name == "color")
+      fillPlanes(frame.get(name), r, out, [exposure](float v) {
+        return tonemap::pu(std::clamp(v * exposure, 0.0f, std::numeric_limits<float>::max()));
+      });
+    else if (name == "albedo")
+      fillPlanes(frame.get(name), r, out, [](float v) { return std::clamp(v, 0.0f, 1.0f); });
+    else
+      fillPlanes(frame.get(name), r, out,
+                 [](float v) { return std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f; });
+  }
+  return input;
+}
+
+torch::Tensor oidnOutputToRadiance(const torch::Tensor& output, float exposure) {
+  auto out = output.to(torch::kCPU, torch::kFloat32).contiguous();
+  float* p = out.data_ptr<float>();
+  const float scale = exposure != 0.0f ? 1.0f / exposure : 0.0f;
+  for (int64_t i = 0, n = out.numel(); i < n; ++i)
+    p[i] = tonemap::puInverse(std::max(std::isnan(p[i]) ? 0.0f : p[i], 0.0f)) * scale;
+  return out;
+}
+
+double oidnBytesPerPixel(const OidnUNetConfig& config) {
+  // The full-resolution decoder level dominates: the concatenation of the
+  // upsampled features with the input, the convolution's output and the input
+  // itself are alive at once; the coarser levels and oneDNN's buffers add about half.
+  const auto convs = oidnConvs(config);
+  const OidnConv& last = *std::find_if(convs.begin(), convs.end(), [&](const OidnConv& c) {
+    return c.in > config.in_channels && c.name.rfind("dec_conv1a", 0) == 0;
+  });
+  return 4.0 * double(last.in + last.out + config.in_channels) * 1.5;
+}
+
+OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers& frame,
+                      const OidnRunOptions& options) {
+  OidnRunResult result;
+  result.exposure =
+      options.exposure > 0.0f ? options.exposure : tonemap::oidnExposure(frame.get("color"));
+  const OidnUNetConfig& config = net->config();
+  const int64_t overlap = config.arch == OidnArch::Large ? kOidnOverlapLarge : kOidnOverlap;
+  int64_t tile = options.tile;
+  if (tile <= 0) {
+    const int64_t side = std::max(frame.width, frame.height);
+    const int64_t budget =
+        tileSizeForMemory(options.maxMemoryBytes, oidnBytesPerPixel(config), kOidnAlignment);
+    const int64_t fits = int64_t(frame.width) * frame.height <= kOidnMaxTilePixels ? side : 2160;
+    tile = std::min(fits, budget);
+  }
+  // The Tiler gives every pixel within overlap / 4 of an inner tile edge zero
+  // weight: at four times OIDN's overlap, each pixel that counts has as much
+  // context as OIDN gives it.
+  const Tiler tiler(frame.height, frame.width, tile, 4 * overlap);
+  result.tileSize = std::min<int64_t>(tile, std::max(frame.width, frame.height));
+  result.tileCount = tiler.tiles().size();
+
+  std::size_t done = 0;
+  result.radiance = tiler.apply([&](const TileRect& r) {
+    torch::Tensor x = oidnInput(frame, set, result.exposure, r);
+    const int64_t padH = (kOidnAlignment - r.height % kOidnAlignment) % kOidnAlignment;
+    const int64_t padW = (kOidnAlignment - r.width % kOidnAlignment) % kOidnAlignment;
+    x = torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0)
+            .to(options.device)
+            .contiguous(torch::MemoryFormat::ChannelsLast);
+    torch::Tensor y = net->forward(x).narrow(2, 0, r.height).narrow(3, 0, r.width);
+    torch::Tensor radiance = oidnOutputToRadiance(y, result.exposure);
+    if (options.progress) options.progress(double(++done) / tiler.tiles().size());
+    return radiance;
+  });
+  return result;
+}
+
+}  // namespace dn

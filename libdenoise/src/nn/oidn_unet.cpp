@@ -1,0 +1,181 @@
+#include "dn/nn/oidn_unet.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace dn {
+namespace {
+
+// Channel widths of OIDN's training/model.py, per size.
+struct Widths {
+  int64_t ec1, ec2, ec3, ec4, ec5, dc4, dc3, dc2a, dc2b, dc1a, dc1b;
+};
+Widths widthsOf(OidnArch arch) {
+  switch (arch) {
+    case OidnArch::Small:
+      return {32, 32, 32, 32, 32, 64, 64, 64, 32, 32, 32};
+    case OidnArch::Large:
+      return {64, 96, 128, 192, 256, 192, 128, 96, 96, 64, 64};
+    default:
+      return {32, 48, 64, 80, 96, 112, 96, 64, 64, 64, 32};
+  }
+}
+
+}  // namespace
+
+const char* oidnArchName(OidnArch arch) {
+  switch (arch) {
+    case OidnArch::Small:
+      return "small";
+    case OidnArch::Large:
+      return "large";
+    default:
+      return "default";
+  }
+}
+
+OidnArch oidnArchFromName(const std::string& name) {
+  for (OidnArch arch : {OidnArch::Default, OidnArch::Small, OidnArch::Large})
+    if (name == oidnArchName(arch)) return arch;
+  throw std::invalid_argument("unknown OIDN network size '" + name +
+                              "' (expected default, small or large)");
+}
+
+std::vector<OidnConv> oidnConvs(const OidnUNetConfig& c) {
+  const Widths w = widthsOf(c.arch);
+  const int64_t ic = c.in_channels, oc = c.out_channels;
+  if (c.arch == OidnArch::Large)
+    return {{"enc_conv1a", ic, w.ec1},
+            {"enc_conv1b", w.ec1, w.ec1},
+            {"enc_conv2a", w.ec1, w.ec2},
+            {"enc_conv2b", w.ec2, w.ec2},
+            {"enc_conv3a", w.ec2, w.ec3},
+            {"enc_conv3b", w.ec3, w.ec3},
+            {"enc_conv4a", w.ec3, w.ec4},
+            {"enc_conv4b", w.ec4, w.ec4},
+            {"enc_conv5a", w.ec4, w.ec5},
+            {"enc_conv5b", w.ec5, w.ec5},
+            {"dec_conv4a", w.ec5 + w.ec3, w.dc4},
+            {"dec_conv4b", w.dc4, w.dc4},
+            {"dec_conv3a", w.dc4 + w.ec2, w.dc3},
+            {"dec_conv3b", w.dc3, w.dc3},
+            {"dec_conv2a", w.dc3 + w.ec1, w.dc2a},
+            {"dec_conv2b", w.dc2a, w.dc2b},
+            {"dec_conv1a", w.dc2b + ic, w.dc1a},
+            {"dec_conv1b", w.dc1a, w.dc1b},
+            {"dec_conv1c", w.dc1b, oc}};
+  return {{"enc_conv0", ic, w.ec1},       {"enc_conv1", w.ec1, w.ec1},
+          {"enc_conv2", w.ec1, w.ec2},    {"enc_conv3", w.ec2, w.ec3},
+          {"enc_conv4", w.ec3, w.ec4},    {"enc_conv5a", w.ec4, w.ec5},
+          {"enc_conv5b", w.ec5, w.ec5},   {"dec_conv4a", w.ec5 + w.ec3, w.dc4},
+          {"dec_conv4b", w.dc4, w.dc4},   {"dec_conv3a", w.dc4 + w.ec2, w.dc3},
+          {"dec_conv3b", w.dc3, w.dc3},   {"dec_conv2a", w.dc3 + w.ec1, w.dc2a},
+          {"dec_conv2b", w.dc2a, w.dc2b}, {"dec_conv1a", w.dc2b + ic, w.dc1a},
+          {"dec_conv1b", w.dc1a, w.dc1b}, {"dec_conv0", w.dc1b, oc}};
+}
+
+OidnUNetImpl::OidnUNetImpl(const OidnUNetConfig& config) : config_(config) {
+  if (config.in_channels < 1 || config.out_channels < 1)
+    throw std::invalid_argument("OIDN network needs at least one input and output channel");
+  for (const OidnConv& c : oidnConvs(config))
+    convs_.emplace(
+        c.name, register_module(c.name, torch::nn::Conv2d(
+                                            torch::nn::Conv2dOptions(c.in, c.out, 3).padding(1))));
+  if (config.arch == OidnArch::Large) {
+    encoder_ = {{"enc_conv1a", "enc_conv1b"},
+                {"enc_conv2a", "enc_conv2b"},
+                {"enc_conv3a", "enc_conv3b"},
+                {"enc_conv4a", "enc_conv4b"}};
+    decoder_ = {{"dec_conv4a", "dec_conv4b"},
+                {"dec_conv3a", "dec_conv3b"},
+                {"dec_conv2a", "dec_conv2b"},
+                {"dec_conv1a", "dec_conv1b", "dec_conv1c"}};
+  } else {
+    encoder_ = {{"enc_conv0", "enc_conv1"}, {"enc_conv2"}, {"enc_conv3"}, {"enc_conv4"}};
+    decoder_ = {{"dec_conv4a", "dec_conv4b"},
+                {"dec_conv3a", "dec_conv3b"},
+                {"dec_conv2a", "dec_conv2b"},
+                {"dec_conv1a", "dec_conv1b", "dec_conv0"}};
+  }
+  bottleneck_ = {"enc_conv5a", "enc_conv5b"};
+}
+
+torch::Tensor OidnUNetImpl::conv(const std::string& name, const torch::Tensor& x) {
+  return convs_.at(name)->forward(x).relu_();
+}
+
+torch::Tensor OidnUNetImpl::forward(const torch::Tensor& input, const ControlResiduals* residuals) {
+  // Skips, fine to coarse: the input, then every pooled level but the last,
+  // which only feeds the bottleneck.
+  std::vector<torch::Tensor> skips = {input};
+  torch::Tensor x = input;
+  for (const auto& level : encoder_) {
+    for (const auto& name : level) x = conv(name, x);
+    x = torch::max_pool2d(x, 2, 2);
+    skips.push_back(x);
+  }
+  skips.pop_back();
+  for (const auto& name : bottleneck_) x = conv(name, x);
+  if (residuals) x = x + residuals->middle;
+  for (size_t level = 0; level < decoder_.size(); ++level) {
+    torch::Tensor skip = skips[skips.size() - 1 - level];
+    if (residuals) skip = skip + residuals->skips[level];
+    x = torch::cat({torch::upsample_nearest2d(x, {x.size(2) * 2, x.size(3) * 2}), skip}, 1);
+    for (const auto& name : decoder_[level]) x = conv(name, x);
+  }
+  return x;
+}
+
+std::vector<int64_t> OidnUNetImpl::skipChannels() const {
+  const Widths w = widthsOf(config_.arch);
+  return {w.ec3, w.ec2, w.ec1, config_.in_channels};
+}
+
+int64_t OidnUNetImpl::bottleneckChannels() const { return widthsOf(config_.arch).ec5; }
+
+const std::vector<OidnInputSet>& oidnInputSets() {
+  static const std::vector<OidnInputSet> sets = {{"hdr", {"color"}},
+                                                 {"hdr_alb", {"color", "albedo"}},
+                                                 {"hdr_alb_nrm", {"color", "albedo", "normal"}}};
+  return sets;
+}
+
+const OidnInputSet& oidnInputSet(const std::string& name) {
+  for (const auto& set : oidnInputSets())
+    if (set.name == name) return set;
+  throw std::invalid_argument("unknown OIDN input set '" + name +
+                              "' (expected hdr, hdr_alb or hdr_alb_nrm)");
+}
+
+OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets)
+    : sets_(inputSets) {
+  if (sets_.empty()) throw std::invalid_argument("the OIDN base needs at least one input set");
+  for (const auto& name : sets_) {
+    const OidnInputSet& set = oidnInputSet(name);
+    if (nets_.count(name)) throw std::invalid_argument("OIDN input set '" + name + "' given twice");
+    nets_.emplace(name, register_module(name, OidnUNet(OidnUNetConfig{arch, set.channels(), 3})));
+  }
+}
+
+std::pair<OidnUNet, const OidnInputSet*> OidnBaseImpl::pick(
+    const std::vector<std::string>& available) const {
+  auto has = [&](const std::string& b) {
+    return std::find(available.begin(), available.end(), b) != available.end();
+  };
+  const OidnInputSet* best = nullptr;
+  for (const auto& set : oidnInputSets())
+    if (nets_.count(set.name) && std::all_of(set.buffers.begin(), set.buffers.end(), has))
+      best = &set;  // sets are listed poorest first
+  if (!best) return {OidnUNet(nullptr), nullptr};
+  return {nets_.at(best->name), best};
+}
+
+OidnUNet OidnBaseImpl::net(const std::string& inputSet) const { return nets_.at(inputSet); }
+
+void OidnBaseImpl::useChannelsLast() {
+  torch::NoGradGuard noGrad;
+  for (auto& p : parameters())
+    if (p.dim() == 4) p.set_data(p.contiguous(torch::MemoryFormat::ChannelsLast));
+}
+
+}  // namespace dn
