@@ -376,7 +376,9 @@ int run(Options o) {
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }
     if (o.verbose) fmt::print(stderr, "\n");
-    if (o.verbose) reportBuffers(name, result.buffersUsed, frame.names());
+    if (o.verbose)
+      reportBuffers(name, result.buffersUsed,
+                    input.empty() ? frame.names() : allowed(o, availableBuffers(input, o.read)));
     if ((o.verbose || o.repeats > 1) && denoiser.info().base_kind == BaseKind::Oidn) {
       std::sort(times.begin(), times.end());
       fmt::print(stderr,

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+
+#include <ATen/Parallel.h>
 
 #include "dn/tonemap.h"
 
@@ -10,18 +13,21 @@ namespace {
 
 float nanToZero(float v) { return std::isnan(v) ? 0.0f : v; }
 
-// Fills `count` channels of `out` (planar, h x w) from a 3- or 1-channel image.
+// Fills three planes of `out` (h x w each) from a 3-channel image, or from a
+// 1-channel one broadcast, as OIDN does; rows in parallel.
 template <typename Transform>
 void fillPlanes(const Image& image, const TileRect& r, float* out, Transform transform) {
   const int64_t plane = r.height * r.width;
-  for (int64_t y = 0; y < r.height; ++y)
-    for (int64_t x = 0; x < r.width; ++x) {
-      const float* p = image.pixel(int(r.x0 + x), int(r.y0 + y));
-      for (int c = 0; c < 3; ++c) {
-        const float v = nanToZero(p[image.channels >= 3 ? c : 0]);
-        out[c * plane + y * r.width + x] = transform(v);
+  at::parallel_for(0, r.height, 16, [&](int64_t begin, int64_t end) {
+    for (int64_t y = begin; y < end; ++y)
+      for (int64_t x = 0; x < r.width; ++x) {
+        const float* p = image.pixel(int(r.x0 + x), int(r.y0 + y));
+        for (int c = 0; c < 3; ++c) {
+          const float v = nanToZero(p[image.channels >= 3 ? c : 0]);
+          out[c * plane + y * r.width + x] = transform(v);
+        }
       }
-    }
+  });
 }
 
 }  // namespace
@@ -51,8 +57,12 @@ torch::Tensor oidnOutputToRadiance(const torch::Tensor& output, float exposure) 
   auto out = output.to(torch::kCPU, torch::kFloat32).contiguous();
   float* p = out.data_ptr<float>();
   const float scale = exposure != 0.0f ? 1.0f / exposure : 0.0f;
-  for (int64_t i = 0, n = out.numel(); i < n; ++i)
-    p[i] = tonemap::puInverse(std::max(std::isnan(p[i]) ? 0.0f : p[i], 0.0f)) * scale;
+  constexpr float kMax = std::numeric_limits<float>::max();
+  // NaN and negatives as 0, as OIDN; what overflows float is clamped, not Inf.
+  at::parallel_for(0, out.numel(), 1 << 14, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i)
+      p[i] = std::min(tonemap::puInverse(std::max(nanToZero(p[i]), 0.0f)) * scale, kMax);
+  });
   return out;
 }
 
