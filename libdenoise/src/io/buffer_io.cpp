@@ -176,7 +176,7 @@ std::vector<std::string> resolveChannels(const ChannelTable& table, const Buffer
   return {};
 }
 
-// The view layers: what stands in front of a colour pass, in file order
+// The view layers: what stands in front of a colour pass, sorted
 // ("ViewLayer.001" of "ViewLayer.001.Combined.R").
 std::vector<std::string> findViewLayers(const ChannelTable& table) {
   std::vector<std::string> layers;
@@ -190,6 +190,7 @@ std::vector<std::string> findViewLayers(const ChannelTable& table) {
         if (std::find(layers.begin(), layers.end(), view) == layers.end()) layers.push_back(view);
       }
     }
+  std::sort(layers.begin(), layers.end());  // OpenEXR stores a part's channels sorted anyway
   return layers;
 }
 
@@ -410,9 +411,14 @@ std::string alphaChannelOf(const ChannelTable& table, const std::vector<std::str
   const std::string& red = color.front();
   const auto dot = red.rfind('.');
   const std::string layer = dot == std::string::npos ? "" : red.substr(0, dot + 1);
-  for (const char* a : {"A", "a"})
-    if (table.has(layer + a) && table.byName.at(layer + a).part == table.byName.at(red).part)
-      return layer + a;
+  const int part = table.byName.at(red).part;
+  // RenderMan may write Ci.r, Ci.g, Ci.b with a bare alpha "a".
+  const std::vector<std::string> layers = layer.find('.') == layer.size() - 1
+                                              ? std::vector<std::string>{layer, ""}
+                                              : std::vector<std::string>{layer};
+  for (const auto& l : layers)
+    for (const char* a : {"A", "a"})
+      if (table.has(l + a) && table.byName.at(l + a).part == part) return l + a;
   return "";
 }
 
@@ -874,6 +880,7 @@ void writeImage(const std::string& path, const Image& image, bool half,
 
 WriteOptions writeOptionsFor(const FrameBuffers& frame) {
   WriteOptions options;
+  options.layer = layerPrefixOf(frame) + options.layer;
   options.dataWindow = frame.dataWindow;
   options.displayWindow = frame.displayWindow;
   options.alpha = frame.alpha;

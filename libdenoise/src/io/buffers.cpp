@@ -18,10 +18,11 @@ const std::vector<BufferSpec>& canonicalBuffers() {
   //   pbrt-v4 (gbuffer film): R,G,B, Albedo, Ns (shading normal), Variance;
   //   Mitsuba 3 (aov integrator, names as its docs use them): R,G,B,
   //     albedo, nn / sh_normal (X,Y,Z), dd.y / depth (T).
-  // Other renderers' light-path AOVs (Arnold diffuse_direct, Karma
-  // directdiffuse, ...) include the surface colour, which Cycles' light passes
-  // do not (Cycles: diffuse = (DiffDir + DiffInd) x DiffCol), so they are not
-  // taken for Cycles' passes; --channels maps them where they match.
+  // Other renderers' light-path AOVs (Arnold diffuse_direct and
+  // transmission_direct, Karma directdiffuse, ...) include the surface colour,
+  // which Cycles' light passes do not (Cycles: diffuse = (DiffDir + DiffInd) x
+  // DiffCol), so they are not taken for Cycles' passes; --channels maps them
+  // where they match.
   static const std::vector<BufferSpec> specs = {
       {"color",
        3,
@@ -35,21 +36,15 @@ const std::vector<BufferSpec>& canonicalBuffers() {
        "first-hit albedo"},
       {"normal",
        3,
-       {"Denoising Normal", "Normal", "normal", "N", "Ns", "Nn", "nn", "sh_normal", "normals",
+       {"Denoising Normal", "Normal", "normal", "Ns", "N", "Nn", "nn", "sh_normal", "normals",
         "VRayNormals", "VRayBumpNormals", "nrm"},
        "first-hit normal"},
       {"depth",
        1,
        {"Denoising Depth", "Depth", "depth", "dd.y", "Z", "z", "zfiltered", "Pz"},
        "camera distance"},
-      {"diffuse_direct",
-       3,
-       {"DiffDir", "Diffuse Direct", "diffuse_direct"},
-       "direct diffuse light"},
-      {"diffuse_indirect",
-       3,
-       {"DiffInd", "Diffuse Indirect", "diffuse_indirect"},
-       "indirect diffuse light"},
+      {"diffuse_direct", 3, {"DiffDir", "Diffuse Direct"}, "direct diffuse light"},
+      {"diffuse_indirect", 3, {"DiffInd", "Diffuse Indirect"}, "indirect diffuse light"},
       {"diffuse_color",
        3,
        {"DiffCol", "Diffuse Color", "diffuse_color", "diffuse_albedo"},
@@ -63,13 +58,10 @@ const std::vector<BufferSpec>& canonicalBuffers() {
        3,
        {"GlossCol", "Glossy Color", "glossy_color", "specular_albedo"},
        "glossy colour"},
-      {"transmission_direct",
-       3,
-       {"TransDir", "Transmission Direct", "transmission_direct"},
-       "direct transmitted light"},
+      {"transmission_direct", 3, {"TransDir", "Transmission Direct"}, "direct transmitted light"},
       {"transmission_indirect",
        3,
-       {"TransInd", "Transmission Indirect", "transmission_indirect"},
+       {"TransInd", "Transmission Indirect"},
        "indirect transmitted light"},
       {"transmission_color",
        3,

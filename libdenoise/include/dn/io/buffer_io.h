@@ -30,7 +30,7 @@ struct ReadOptions {
   std::string viewLayer;
 };
 
-// The view layers of a multilayer file, in file order: the prefixes in front
+// The view layers of a multilayer file, sorted: the prefixes in front
 // of a colour pass ("ViewLayer" of "ViewLayer.Combined.R"). Empty for files
 // without view layers.
 std::vector<std::string> viewLayers(const std::string& path);
@@ -80,8 +80,8 @@ struct WriteOptions {
   Image alpha;
 };
 
-// WriteOptions that place the result where `frame` was read from and carry
-// its colour's alpha.
+// WriteOptions that place the result where `frame` was read from, as layer
+// "Denoised" in its view layer, carrying its colour's alpha.
 WriteOptions writeOptionsFor(const FrameBuffers& frame);
 
 // Writes `result` as a named layer next to every layer and the metadata of
