@@ -68,6 +68,7 @@ apply options:
 single-file options:
   -o OUT                 output file: the input's layers plus the result layer
   --layer NAME           result layer (default Cleansed or Denoised, by the model's task)
+  --view-layer NAME      the view layer of a multilayer file with several
   --rgb-only             write a plain RGB file instead
 exit codes: 0 ok, 1 bad input or arguments, 130/143 training stopped by SIGINT/SIGTERM
             (checkpoint written; continue with --resume)
@@ -509,7 +510,7 @@ int runApply(cli::Args& args) {
 // ---------------------------------------------------------------- one file
 
 int runFile(cli::Args& args) {
-  std::string input, output, model_path, layer;
+  std::string input, output, model_path, layer, viewLayer;
   bool rgb = false;
   int threads = 2;
   while (!args.done()) {
@@ -519,6 +520,8 @@ int runFile(cli::Args& args) {
       model_path = args.value("--model");
     else if (args.flag("--layer"))
       layer = args.value("--layer");
+    else if (args.flag("--view-layer"))
+      viewLayer = args.value("--view-layer");
     else if (args.flag("--rgb-only"))
       rgb = true;
     else if (args.flag("--threads"))
@@ -536,8 +539,9 @@ int runFile(cli::Args& args) {
   auto model = loadKernelModel(model_path);
   ReadOptions read;
   read.only = requiredBuffers(model.info.net);
+  read.viewLayer = viewLayer;
   const auto frame = readFrame(input, read);
-  WriteOptions write;
+  WriteOptions write = writeOptionsFor(frame);  // its data window and alpha
   write.half = false;
   write.rgbOnly = rgb;
   write.layer = !layer.empty()

@@ -61,7 +61,8 @@ input buffers:
   --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
   --channels BUF=C1,C2,C3  take a buffer from these channels (repeatable)
-  --view-layer NAME   which view layer of a multilayer file (default: the first)
+  --view-layer NAME   which view layer of a multilayer file (default: the only one;
+                      a file with several needs it)
   --buffers LIST      use only these buffers (e.g. color,albedo), to compare buffer
                       sets (default: every buffer the model knows that the input has)
 output:
@@ -356,7 +357,10 @@ int run(Options o) {
     if (!input.empty() && !o.inplace && fs::exists(output, ec) && fs::equivalent(input, output, ec))
       throw IoError(output + ": is the input file; refusing to overwrite it (use --inplace)");
     FrameBuffers frame = readInput(o, denoiser, input, name);
-    if (o.verbose) reportInputStatistics(name, frame.get("color"));
+    if (o.verbose) {
+      for (const auto& note : frame.notes) fmt::print(stderr, "dndenoise: {}: {}\n", name, note);
+      reportInputStatistics(name, frame.get("color"));
+    }
 
     DenoiseOptions options = o.denoise;
     options.device = torch::Device(o.device);
@@ -402,7 +406,7 @@ int run(Options o) {
           times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     }
 
-    WriteOptions write;
+    WriteOptions write = writeOptionsFor(frame);  // its data window and alpha
     // A sun or lamp above half's range (65504) would be written as Inf.
     write.half = !o.floatOut && fitsHalf(result.color);
     if (o.verbose && !o.floatOut && !write.half)

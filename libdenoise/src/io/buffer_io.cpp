@@ -1,12 +1,14 @@
 #include "dn/io/buffer_io.h"
 
 #include <OpenImageIO/imageio.h>
+#include <OpenImageIO/strutil.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <set>
 
 #include <unistd.h>
@@ -30,18 +32,47 @@ std::string firstLine(std::string text) {
   return text.empty() ? "unknown error" : text;
 }
 
+std::string joined(const std::vector<std::string>& items) {
+  std::string out;
+  for (const auto& i : items) out += (out.empty() ? "" : ", ") + i;
+  return out;
+}
+
+bool endsWith(const std::string& text, const std::string& tail) {
+  return text.size() >= tail.size() &&
+         text.compare(text.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+PixelWindow dataWindowOf(const OIIO::ImageSpec& spec) {
+  return {spec.x, spec.y, spec.width, spec.height};
+}
+
+PixelWindow displayWindowOf(const OIIO::ImageSpec& spec) {
+  return {spec.full_x, spec.full_y, spec.full_width, spec.full_height};
+}
+
+// One part (OIIO subimage) of a file, level 0, with its channels' full names.
+struct Part {
+  OIIO::ImageSpec spec;
+  std::vector<std::string> names;
+};
+
 // Where one channel lives in a file.
 struct ChannelRef {
-  int subimage;
+  int part;
   int index;
 };
 
-// All channels of all subimages of an open file, by full name. Parts of
-// multi-part files whose channels carry no layer get the part's name as layer.
+// All channels of all parts of an open file. Channels of a multi-part file
+// that carry no layer (Nuke's "rgba" part with R, G, B, A) get the part's name
+// as layer; Blender 5 already writes full names ("ViewLayer.Combined.R").
 struct ChannelTable {
-  std::map<std::string, ChannelRef> byName;
-  std::vector<OIIO::ImageSpec> specs;
-  std::vector<std::string> viewLayers;  // first components of "V.Layer.C" names
+  std::vector<Part> parts;
+  std::vector<std::string> ordered;          // every full name, in file order
+  std::map<std::string, ChannelRef> byName;  // the first part wins a duplicate name
+
+  bool has(const std::string& name) const { return byName.count(name) != 0; }
+  const Part& partOf(const std::string& name) const { return parts[byName.at(name).part]; }
 };
 
 std::unique_ptr<OIIO::ImageInput> openInput(const std::string& path) {
@@ -53,109 +84,196 @@ std::unique_ptr<OIIO::ImageInput> openInput(const std::string& path) {
   return in;
 }
 
+std::string fullChannelName(const OIIO::ImageSpec& spec, int c, bool multiPart) {
+  const std::string& name = spec.channelnames[c];
+  const std::string part = spec.get_string_attribute("oiio:subimagename");
+  if (multiPart && !part.empty() && name.find('.') == std::string::npos) return part + "." + name;
+  return name;
+}
+
 ChannelTable scanChannels(OIIO::ImageInput& in, const std::string& path) {
   ChannelTable table;
   for (int s = 0; in.seek_subimage(s, 0); ++s) {
     const OIIO::ImageSpec& spec = in.spec();
-    if (s > 0 && (spec.width != table.specs[0].width || spec.height != table.specs[0].height))
-      continue;  // a part of another size (e.g. a preview) is not a buffer of this frame
-    std::string part = spec.get_string_attribute("oiio:subimagename");
-    for (int c = 0; c < spec.nchannels; ++c) {
-      std::string name = spec.channelnames[c];
-      if (s > 0 && name.find('.') == std::string::npos && !part.empty()) name = part + "." + name;
-      table.byName.emplace(name, ChannelRef{s, c});
-      auto first = name.find('.');
-      if (first != std::string::npos && name.find('.', first + 1) != std::string::npos) {
-        std::string view = name.substr(0, first);
-        if (std::find(table.viewLayers.begin(), table.viewLayers.end(), view) ==
-            table.viewLayers.end())
-          table.viewLayers.push_back(view);
-      }
-    }
-    table.specs.push_back(spec);
+    if (spec.deep) fail(path, "is a deep image; flatten it first (oiiotool IN --flatten -o OUT)");
+    table.parts.push_back(Part{spec, {}});
   }
-  if (table.specs.empty()) fail(path, "has no readable image");
+  if (table.parts.empty()) fail(path, "has no readable image");
+  const bool multiPart = table.parts.size() > 1;
+  for (std::size_t p = 0; p < table.parts.size(); ++p) {
+    Part& part = table.parts[p];
+    for (int c = 0; c < part.spec.nchannels; ++c) {
+      part.names.push_back(fullChannelName(part.spec, c, multiPart));
+      if (table.byName.emplace(part.names.back(), ChannelRef{int(p), c}).second)
+        table.ordered.push_back(part.names.back());
+    }
+  }
   return table;
 }
 
-const std::vector<std::vector<std::string>>& suffixSets(int channels) {
-  static const std::vector<std::vector<std::string>> rgb = {
-      {"R", "G", "B"}, {"X", "Y", "Z"}, {"r", "g", "b"}, {"x", "y", "z"}};
-  static const std::vector<std::vector<std::string>> scalar = {{"Z"}, {"V"}, {"X"}, {"R"}, {"Y"}};
-  return channels == 3 ? rgb : scalar;
+// ---------------------------------------------------------------- lookup
+
+// Channel suffixes of three-channel layers (Nuke spells them out) and of
+// scalar layers (Mitsuba writes depth as "T").
+const std::vector<std::vector<std::string>>& tripletSuffixes() {
+  static const std::vector<std::vector<std::string>> sets = {
+      {"R", "G", "B"}, {"X", "Y", "Z"}, {"r", "g", "b"}, {"x", "y", "z"}, {"red", "green", "blue"}};
+  return sets;
 }
 
-// Finds the channel names of a canonical buffer, or an empty list.
-std::vector<std::string> resolveChannels(const ChannelTable& table, const BufferSpec& spec,
-                                         const std::string& viewLayer) {
-  std::vector<std::string> prefixes;
-  if (!viewLayer.empty()) prefixes.push_back(viewLayer + ".");
-  for (const auto& v : table.viewLayers)
-    if (v != viewLayer) prefixes.push_back(v + ".");
-  prefixes.push_back("");
+bool isScalarSuffix(const std::string& s) {
+  static const std::set<std::string> suffixes = {"Z", "V", "X", "R", "Y", "T", "z", "y"};
+  return suffixes.count(s) != 0;
+}
 
+using Usable = std::function<bool(const std::string&)>;
+
+// The channels of layer `base` ("" for none) as a buffer of `channels`
+// channels, or an empty list.
+std::vector<std::string> channelsOfLayer(const ChannelTable& table, const std::string& base,
+                                         int channels, const Usable& usable) {
+  auto present = [&](const std::string& n) { return table.has(n) && usable(n); };
+  if (channels == 3) {
+    for (const auto& suffixes : tripletSuffixes()) {
+      std::vector<std::string> names;
+      for (const auto& s : suffixes) names.push_back(base.empty() ? s : base + "." + s);
+      if (std::all_of(names.begin(), names.end(), present)) return names;
+    }
+    // pbrt's older gbuffer names: Nx, Ny, Nz
+    std::vector<std::string> joinedNames = {base + "x", base + "y", base + "z"};
+    if (!base.empty() && std::all_of(joinedNames.begin(), joinedNames.end(), present))
+      return joinedNames;
+    return {};
+  }
+  if (base.empty()) return {};
+  if (present(base)) return {base};  // a bare scalar channel such as "Z"
+  // A layer of exactly one channel ("ViewLayer.Depth.Z", "depth.T"): a layer
+  // of three ("transmission.R/G/B") is a colour, not this scalar.
+  std::vector<std::string> inLayer;
+  for (const auto& n : table.ordered)
+    if (n.size() > base.size() + 1 && n.compare(0, base.size() + 1, base + ".") == 0 &&
+        n.find('.', base.size() + 1) == std::string::npos)
+      inLayer.push_back(n);
+  if (inLayer.size() == 1 && isScalarSuffix(inLayer[0].substr(base.size() + 1)) &&
+      usable(inLayer[0]))
+    return inLayer;
+  return {};
+}
+
+// Finds the channels of a canonical buffer under the view-layer prefixes, in
+// order ("ViewLayer." then top level), or an empty list.
+std::vector<std::string> resolveChannels(const ChannelTable& table, const BufferSpec& spec,
+                                         const std::vector<std::string>& prefixes,
+                                         const Usable& usable) {
   for (const auto& layer : spec.layers) {
     for (const auto& prefix : prefixes) {
-      std::string base = layer.empty() ? prefix : prefix + layer + ".";
       if (layer.empty() && !prefix.empty()) continue;  // plain R,G,B means no layer at all
-      if (spec.channels == 1 && !layer.empty() && table.byName.count(prefix + layer))
-        return {prefix + layer};  // a bare scalar channel such as "Z"
-      for (const auto& suffixes : suffixSets(spec.channels)) {
-        std::vector<std::string> names;
-        for (const auto& s : suffixes)
-          if (table.byName.count(base + s)) names.push_back(base + s);
-        if (names.size() == suffixes.size()) return names;
-      }
+      const std::string base = layer.empty() ? "" : prefix + layer;
+      auto names = channelsOfLayer(table, base, spec.channels, usable);
+      if (!names.empty()) return names;
     }
   }
   return {};
 }
 
-// Reads the named channels into one interleaved float image, strip by strip.
+// The view layers: what stands in front of a colour pass, sorted
+// ("ViewLayer.001" of "ViewLayer.001.Combined.R").
+std::vector<std::string> findViewLayers(const ChannelTable& table) {
+  std::vector<std::string> layers;
+  for (const auto& name : table.ordered)
+    for (const auto& pass : findBufferSpec("color")->layers) {
+      if (pass.empty()) continue;
+      for (const char* red : {"R", "r"}) {
+        const std::string tail = "." + pass + "." + red;
+        if (name.size() <= tail.size() || !endsWith(name, tail)) continue;
+        std::string view = name.substr(0, name.size() - tail.size());
+        if (std::find(layers.begin(), layers.end(), view) == layers.end()) layers.push_back(view);
+      }
+    }
+  std::sort(layers.begin(), layers.end());  // OpenEXR stores a part's channels sorted anyway
+  return layers;
+}
+
+// The view layer to read: the one asked for, else the only one. Blender's
+// "Composite" (the compositor's output) is a view layer only when asked for.
+std::string chooseViewLayer(const ChannelTable& table, const std::string& path,
+                            const std::string& requested) {
+  const std::vector<std::string> layers = findViewLayers(table);
+  if (!requested.empty()) {
+    if (std::find(layers.begin(), layers.end(), requested) == layers.end())
+      fail(path, "has no view layer '" + requested +
+                     "' (has: " + (layers.empty() ? std::string("none") : joined(layers)) + ")");
+    return requested;
+  }
+  std::vector<std::string> candidates;
+  for (const auto& l : layers)
+    if (l != "Composite" || layers.size() == 1) candidates.push_back(l);
+  if (candidates.size() > 1)
+    fail(path, "has " + std::to_string(candidates.size()) + " view layers (" + joined(candidates) +
+                   "); choose one with --view-layer NAME");
+  return candidates.empty() ? "" : candidates.front();
+}
+
+// ---------------------------------------------------------------- pixels
+
+// Rows read or written at once: bounds memory on 4K frames; whole tiles for
+// tiled files, whose reads must start on a tile boundary.
+int stripRows(const OIIO::ImageSpec& spec) {
+  if (spec.tile_height <= 0) return kStripRows;
+  return std::max(1, (kStripRows + spec.tile_height - 1) / spec.tile_height) * spec.tile_height;
+}
+
+// Rows [y0, y1) of channels [cb, ce) of one part, full width, as float.
+bool readStrip(OIIO::ImageInput& in, int part, const OIIO::ImageSpec& spec, int y0, int y1, int cb,
+               int ce, float* out) {
+  if (spec.tile_width > 0)
+    return in.read_tiles(part, 0, spec.x, spec.x + spec.width, y0, y1, spec.z,
+                         spec.z + std::max(1, spec.depth), cb, ce, OIIO::TypeDesc::FLOAT, out);
+  return in.read_scanlines(part, 0, y0, y1, spec.z, cb, ce, OIIO::TypeDesc::FLOAT, out);
+}
+
+// Reads the named channels into one interleaved float image covering
+// `window`, by pixel coordinates: where a channel's part has no data, 0.
 Image readChannels(OIIO::ImageInput& in, const ChannelTable& table, const std::string& path,
-                   const std::vector<std::string>& names) {
+                   const std::vector<std::string>& names, const PixelWindow& window) {
   std::vector<ChannelRef> refs;
   for (const auto& n : names) {
     auto it = table.byName.find(n);
     if (it == table.byName.end()) fail(path, "has no channel '" + n + "'");
     refs.push_back(it->second);
   }
-  const OIIO::ImageSpec& spec0 = table.specs[0];
-  Image image(spec0.width, spec0.height, static_cast<int>(names.size()));
-
-  // Group by subimage; read each subimage's covering channel range once per strip.
-  std::set<int> subimages;
-  for (const auto& r : refs) subimages.insert(r.subimage);
-  for (int s : subimages) {
+  Image image(window.width, window.height, static_cast<int>(names.size()));
+  std::set<int> parts;
+  for (const auto& r : refs) parts.insert(r.part);
+  for (int p : parts) {
     int lo = INT32_MAX, hi = -1;
     for (const auto& r : refs)
-      if (r.subimage == s) lo = std::min(lo, r.index), hi = std::max(hi, r.index);
+      if (r.part == p) lo = std::min(lo, r.index), hi = std::max(hi, r.index);
     const int span = hi - lo + 1;
-    if (!in.seek_subimage(s, 0)) fail(path, "cannot seek to part " + std::to_string(s));
-    const OIIO::ImageSpec& spec = in.spec();
-    std::vector<float> strip(static_cast<std::size_t>(spec.width) * kStripRows * span);
-    for (int y0 = 0; y0 < spec.height; y0 += kStripRows) {
-      int y1 = std::min(spec.height, y0 + kStripRows);
-      if (!in.read_scanlines(s, 0, spec.y + y0, spec.y + y1, 0, lo, hi + 1, OIIO::TypeDesc::FLOAT,
-                             strip.data()))
+    const OIIO::ImageSpec& spec = table.parts[p].spec;
+    const int x0 = std::max(spec.x, window.x),
+              x1 = std::min(spec.x + spec.width, window.x + window.width);
+    const int y0 = std::max(spec.y, window.y),
+              y1 = std::min(spec.y + spec.height, window.y + window.height);
+    if (x0 >= x1 || y0 >= y1) continue;
+    const int rows = stripRows(spec);
+    std::vector<float> strip(static_cast<std::size_t>(spec.width) * rows * span);
+    for (int ys = spec.y + (y0 - spec.y) / rows * rows; ys < y1; ys += rows) {
+      const int ye = std::min(spec.y + spec.height, ys + rows);
+      if (!readStrip(in, p, spec, ys, ye, lo, hi + 1, strip.data()))
         fail(path, "corrupt or truncated image data (" + firstLine(in.geterror()) + ")");
       for (std::size_t k = 0; k < refs.size(); ++k) {
-        if (refs[k].subimage != s) continue;
+        if (refs[k].part != p) continue;
         const int offset = refs[k].index - lo;
-        for (int y = y0; y < y1; ++y)
-          for (int x = 0; x < spec.width; ++x)
-            image.at(x, y, static_cast<int>(k)) =
-                strip[(static_cast<std::size_t>(y - y0) * spec.width + x) * span + offset];
+        for (int y = std::max(ys, y0); y < std::min(ye, y1); ++y)
+          for (int x = x0; x < x1; ++x)
+            image.at(x - window.x, y - window.y, static_cast<int>(k)) =
+                strip[(static_cast<std::size_t>(y - ys) * spec.width + (x - spec.x)) * span +
+                      offset];
       }
     }
   }
   return image;
-}
-
-std::string joined(const std::vector<std::string>& items) {
-  std::string out;
-  for (const auto& i : items) out += (out.empty() ? "" : ", ") + i;
-  return out;
 }
 
 // Temporary name in the destination's folder with the same extension, so the
@@ -243,33 +361,162 @@ std::pair<std::string, std::vector<std::string>> parseChannelOverride(const std:
 
 namespace {
 
+// A canonical buffer found in a file: its channels, all in one display window.
+struct Located {
+  std::string buffer;
+  std::vector<std::string> channels;
+};
+
 // Every canonical buffer the file holds (in canonical order) with its channels:
-// the overrides, else the names found in the chosen view layer.
-std::vector<std::pair<std::string, std::vector<std::string>>> locateBuffers(
-    const ChannelTable& table, const std::string& path, const ReadOptions& options) {
-  if (!options.viewLayer.empty() && std::find(table.viewLayers.begin(), table.viewLayers.end(),
-                                              options.viewLayer) == table.viewLayers.end())
-    fail(path,
-         "has no view layer '" + options.viewLayer + "' (has: " + joined(table.viewLayers) + ")");
-  std::vector<std::pair<std::string, std::vector<std::string>>> located;
-  for (const auto& spec : canonicalBuffers()) {
+// the overrides, else the names found in the chosen view layer. Buffers from a
+// part with another display window than the colour's (a preview) are not used.
+std::vector<Located> locateBuffers(const ChannelTable& table, const std::string& path,
+                                   const ReadOptions& options) {
+  const std::string view = chooseViewLayer(table, path, options.viewLayer);
+  std::vector<std::string> prefixes;
+  if (!view.empty()) prefixes.push_back(view + ".");
+  prefixes.push_back("");
+
+  auto channelsFor = [&](const BufferSpec& spec, const Usable& usable) {
     auto override = options.overrides.find(spec.name);
-    std::vector<std::string> names = override != options.overrides.end()
-                                         ? override->second
-                                         : resolveChannels(table, spec, options.viewLayer);
-    if (!names.empty()) located.emplace_back(spec.name, std::move(names));
+    if (override != options.overrides.end()) return override->second;
+    return resolveChannels(table, spec, prefixes, usable);
+  };
+  std::vector<Located> located;
+  const auto color = channelsFor(*findBufferSpec("color"), [](const std::string&) { return true; });
+  if (!color.empty() && table.has(color.front())) {
+    const PixelWindow frame = displayWindowOf(table.partOf(color.front()).spec);
+    const Usable sameFrame = [&table, frame](const std::string& n) {
+      return displayWindowOf(table.partOf(n).spec) == frame;
+    };
+    for (const auto& spec : canonicalBuffers()) {
+      auto names = spec.name == "color" ? color : channelsFor(spec, sameFrame);
+      if (!names.empty()) located.push_back({spec.name, std::move(names)});
+    }
+    return located;
   }
+  if (!color.empty()) located.push_back({"color", color});  // an override naming no channel
+  for (const auto& spec : canonicalBuffers())
+    if (spec.name != "color") {
+      auto names = channelsFor(spec, [](const std::string&) { return true; });
+      if (!names.empty()) located.push_back({spec.name, std::move(names)});
+    }
   return located;
 }
 
-}  // namespace
+// The alpha beside the colour's channels: "ViewLayer.Combined.A" for
+// "ViewLayer.Combined.R", "A" for "R"; "" when there is none.
+std::string alphaChannelOf(const ChannelTable& table, const std::vector<std::string>& color) {
+  if (color.empty() || !table.has(color.front())) return "";
+  const std::string& red = color.front();
+  const auto dot = red.rfind('.');
+  const std::string layer = dot == std::string::npos ? "" : red.substr(0, dot + 1);
+  const int part = table.byName.at(red).part;
+  // RenderMan may write Ci.r, Ci.g, Ci.b with a bare alpha "a".
+  const std::vector<std::string> layers = layer.find('.') == layer.size() - 1
+                                              ? std::vector<std::string>{layer, ""}
+                                              : std::vector<std::string>{layer};
+  for (const auto& l : layers)
+    for (const char* a : {"A", "a"})
+      if (table.has(l + a) && table.byName.at(l + a).part == part) return l + a;
+  return "";
+}
 
-std::vector<std::string> availableBuffers(const std::string& path, const ReadOptions& options) {
-  auto in = openInput(path);
-  std::vector<std::string> names;
-  for (const auto& [name, channels] : locateBuffers(scanChannels(*in, path), path, options))
-    names.push_back(name);
-  return names;
+float srgbToLinear(float v) {
+  return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+
+// 8- and 16-bit images (PNG, JPEG, TIFF) store colours sRGB-encoded; the model
+// works on linear radiance and albedo.
+bool storedAsSrgb(const OIIO::ImageSpec& spec) {
+  const bool integer = spec.format.basetype != OIIO::TypeDesc::FLOAT &&
+                       spec.format.basetype != OIIO::TypeDesc::HALF &&
+                       spec.format.basetype != OIIO::TypeDesc::DOUBLE;
+  const std::string space = spec.get_string_attribute("oiio:ColorSpace");
+  return integer && (space.empty() || OIIO::Strutil::iequals(space, "sRGB"));
+}
+
+void linearizeIfSrgb(Image& image, const OIIO::ImageSpec& spec, const std::string& buffer,
+                     std::vector<std::string>& notes) {
+  if (!storedAsSrgb(spec)) return;
+  for (float& v : image.pixels) v = srgbToLinear(v);
+  notes.push_back(buffer + ": " + spec.format.c_str() +
+                  " pixels read as sRGB-encoded and converted to linear");
+}
+
+// Normals stored as (n + 1) / 2 (image formats without negative values, some
+// renderers' defaults) are decoded; the model was trained on Cycles' world-space
+// normals in [-1, 1]. Every decision is one line in `notes`.
+void decodeNormals(Image& normal, const std::vector<std::string>& source,
+                   std::vector<std::string>& notes) {
+  std::size_t lit = 0, rawUnit = 0, encodedUnit = 0;
+  bool nonNegative = true;
+  for (std::size_t i = 0; i < normal.pixelCount(); ++i) {
+    const float* n = &normal.pixels[i * 3];
+    if (n[0] == 0.0f && n[1] == 0.0f && n[2] == 0.0f) continue;  // background
+    ++lit;
+    nonNegative = nonNegative && n[0] >= 0.0f && n[1] >= 0.0f && n[2] >= 0.0f;
+    const double raw = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+    double encoded = 0.0;
+    for (int c = 0; c < 3; ++c) encoded += (2.0 * n[c] - 1.0) * (2.0 * n[c] - 1.0);
+    rawUnit += std::abs(raw - 1.0) < 0.1;
+    encodedUnit += std::abs(std::sqrt(encoded) - 1.0) < 0.1;
+  }
+  if (lit == 0) return;
+  const std::string from = "normal (" + joined(source) + ")";
+  auto percent = [lit](std::size_t n) { return std::to_string(100 * n / lit) + " %"; };
+  if (nonNegative && encodedUnit * 2 >= lit && encodedUnit > rawUnit) {
+    for (std::size_t i = 0; i < normal.pixelCount(); ++i) {
+      float* n = &normal.pixels[i * 3];
+      if (n[0] == 0.0f && n[1] == 0.0f && n[2] == 0.0f) continue;
+      for (int c = 0; c < 3; ++c) n[c] = 2.0f * n[c] - 1.0f;
+    }
+    notes.push_back(
+        from + ": stored as (n + 1) / 2 (no negative component, |2n - 1| within 10 % of 1 in " +
+        percent(encodedUnit) + " of pixels); decoded to [-1, 1]");
+  } else if (rawUnit * 2 < lit) {
+    notes.push_back(from + ": lengths are not near 1 (within 10 % in " + percent(rawUnit) +
+                    " of pixels); used as stored");
+  }
+  const std::string& first = source.front();
+  if (first.find("Denoising Normal") == std::string::npos &&
+      first.find("Normal.") == std::string::npos)
+    notes.push_back(from + ": taken as world-space, as Cycles writes normals");
+}
+
+// Reads the located buffers of an open file into a frame: the colour's data
+// window, its alpha, and the notes on what was decoded.
+FrameBuffers readLocated(OIIO::ImageInput& in, const ChannelTable& table, const std::string& path,
+                         const std::vector<Located>& located, const ReadOptions& options) {
+  FrameBuffers frame;
+  const std::vector<std::string>* color = nullptr;
+  for (const auto& l : located)
+    if (l.buffer == "color") color = &l.channels;
+  if (!color) return frame;
+  for (const auto& name : *color)
+    if (!table.has(name)) fail(path, "has no channel '" + name + "'");
+  const OIIO::ImageSpec& colorSpec = table.partOf(color->front()).spec;
+  frame.dataWindow = dataWindowOf(colorSpec);
+  frame.displayWindow = displayWindowOf(colorSpec);
+  frame.width = frame.dataWindow.width;
+  frame.height = frame.dataWindow.height;
+  for (const auto& [name, channels] : located) {
+    const bool wanted = options.only.empty() || std::find(options.only.begin(), options.only.end(),
+                                                          name) != options.only.end();
+    if (!wanted) continue;
+    Image image = readChannels(in, table, path, channels, frame.dataWindow);
+    const OIIO::ImageSpec& spec = table.partOf(channels.front()).spec;
+    if (name == "color" || name == "albedo") linearizeIfSrgb(image, spec, name, frame.notes);
+    if (name == "normal") decodeNormals(image, channels, frame.notes);
+    frame.buffers[name] = std::move(image);
+    frame.sourceChannels[name] = channels;
+  }
+  const std::string alpha = alphaChannelOf(table, *color);
+  if (!alpha.empty()) frame.alpha = readChannels(in, table, path, {alpha}, frame.dataWindow);
+  if (color->front().find("Noisy Image") != std::string::npos)
+    frame.notes.push_back("color: from '" + color->front().substr(0, color->front().rfind('.')) +
+                          "' (Cycles' own denoiser ran, so Combined is already denoised)");
+  return frame;
 }
 
 namespace {
@@ -298,76 +545,123 @@ int recordedSamples(const OIIO::ImageSpec& spec, const std::string& layerPrefix)
 
 }  // namespace
 
+}  // namespace
+
+std::vector<std::string> viewLayers(const std::string& path) {
+  auto in = openInput(path);
+  return findViewLayers(scanChannels(*in, path));
+}
+
+std::vector<std::string> availableBuffers(const std::string& path, const ReadOptions& options) {
+  auto in = openInput(path);
+  std::vector<std::string> names;
+  for (const auto& l : locateBuffers(scanChannels(*in, path), path, options))
+    names.push_back(l.buffer);
+  return names;
+}
+
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
   auto in = openInput(path);
   ChannelTable table = scanChannels(*in, path);
-  FrameBuffers frame;
-  frame.width = table.specs[0].width;
-  frame.height = table.specs[0].height;
-  for (const auto& [name, channels] : locateBuffers(table, path, options)) {
-    bool wanted = options.only.empty() ||
-                  std::find(options.only.begin(), options.only.end(), name) != options.only.end();
-    if (!wanted) continue;
-    frame.buffers[name] = readChannels(*in, table, path, channels);
-    frame.sourceChannels[name] = channels;
-  }
+  FrameBuffers frame = readLocated(*in, table, path, locateBuffers(table, path, options), options);
   if (!frame.has("color")) {
-    std::vector<std::string> all;
-    for (const auto& [name, ref] : table.byName) all.push_back(name);
+    std::vector<std::string> all = table.ordered;
     if (all.size() > 12) all.resize(12), all.push_back("...");
     fail(path, "no colour channels found (looked for Combined.RGB, R,G,B, rgba, beauty; file has " +
                    joined(all) + "); map them with --channels color=R,G,B");
   }
   for (const auto& name : options.only)
     if (!frame.has(name)) fail(path, "has no '" + name + "' buffer");
-  frame.samplesPerPixel = recordedSamples(table.specs[0], layerPrefixOf(frame));
+  frame.samplesPerPixel = recordedSamples(
+      table.partOf(frame.sourceChannels.at("color").front()).spec, layerPrefixOf(frame));
   return frame;
 }
 
 std::vector<std::string> channelNames(const std::string& path) {
   auto in = openInput(path);
-  ChannelTable table = scanChannels(*in, path);
-  std::vector<std::string> names;
-  for (const auto& [name, ref] : table.byName) names.push_back(name);
-  return names;
+  return scanChannels(*in, path).ordered;
 }
+
+namespace {
+
+// The channels readImage reads when none are named: the colour of a
+// multilayer file for 3, else the first `channels` of the first part.
+std::vector<std::string> defaultImageChannels(const ChannelTable& table, const std::string& path,
+                                              int channels) {
+  const Part& first = table.parts.front();
+  const int n = channels <= 0 ? first.spec.nchannels : channels;
+  if (first.spec.nchannels < n && !(n == 3 && table.ordered.size() > 3))
+    fail(path,
+         "has " + std::to_string(first.spec.nchannels) + " channels, needs " + std::to_string(n));
+  if (n == 3 && table.ordered.size() > 3) {  // prefer the colour of a multilayer file
+    for (const auto& l : locateBuffers(table, path, ReadOptions{}))
+      if (l.buffer == "color") return l.channels;
+    if (first.spec.nchannels < 3) fail(path, "no colour channels found");
+  }
+  return std::vector<std::string>(first.names.begin(), first.names.begin() + n);
+}
+
+}  // namespace
 
 Image readImage(const std::string& path, int channels, const std::vector<std::string>& names) {
   auto in = openInput(path);
   ChannelTable table = scanChannels(*in, path);
-  std::vector<std::string> wanted = names;
-  if (wanted.empty()) {
-    const auto& spec = table.specs[0];
-    int n = channels <= 0 ? spec.nchannels : channels;
-    if (spec.nchannels < n)
-      fail(path, "has " + std::to_string(spec.nchannels) + " channels, needs " + std::to_string(n));
-    if (n == 3 && spec.nchannels > 3) {  // prefer the colour of a multilayer file
-      FrameBuffers frame = readFrame(path, ReadOptions{{}, {"color"}, ""});
-      return frame.buffers.at("color");
-    }
-    for (int c = 0; c < n; ++c) wanted.push_back(spec.channelnames[c]);
-  }
-  return readChannels(*in, table, path, wanted);
+  const std::vector<std::string> wanted =
+      names.empty() ? defaultImageChannels(table, path, channels) : names;
+  for (const auto& n : wanted)
+    if (!table.has(n)) fail(path, "has no channel '" + n + "'");
+  return readChannels(*in, table, path, wanted, dataWindowOf(table.partOf(wanted.front()).spec));
 }
+
+namespace {
+
+std::string sizeText(const PixelWindow& w) {
+  return std::to_string(w.width) + "x" + std::to_string(w.height);
+}
+
+// One buffer from its own file (EXR, PFM, HDR, PNG, ...), placed in the
+// colour's data window by pixel coordinates.
+Image readBufferFile(const std::string& path, const BufferSpec& spec, FrameBuffers& frame) {
+  auto in = openInput(path);
+  ChannelTable table = scanChannels(*in, path);
+  std::vector<std::string> channels;  // the buffer's own names first: albedo.R of an AOV file
+  for (const auto& l : locateBuffers(table, path, ReadOptions{}))
+    if (l.buffer == spec.name && spec.name != "color") channels = l.channels;
+  if (channels.empty()) channels = defaultImageChannels(table, path, spec.channels);
+  const OIIO::ImageSpec& source = table.partOf(channels.front()).spec;
+  if (frame.buffers.empty()) {  // the colour: it sets the frame
+    frame.dataWindow = dataWindowOf(source);
+    frame.displayWindow = displayWindowOf(source);
+    frame.width = frame.dataWindow.width;
+    frame.height = frame.dataWindow.height;
+    const std::string alpha = alphaChannelOf(table, channels);
+    if (!alpha.empty()) frame.alpha = readChannels(*in, table, path, {alpha}, frame.dataWindow);
+  } else if (displayWindowOf(source) != frame.displayWindow) {
+    fail(path, "is " + sizeText(displayWindowOf(source)) + " but the colour image is " +
+                   sizeText(frame.displayWindow));
+  }
+  Image image = readChannels(*in, table, path, channels, frame.dataWindow);
+  if (spec.name == "color" || spec.name == "albedo")
+    linearizeIfSrgb(image, source, spec.name, frame.notes);
+  if (spec.name == "normal") decodeNormals(image, channels, frame.notes);
+  frame.sourceChannels[spec.name] = channels;
+  return image;
+}
+
+}  // namespace
 
 FrameBuffers readSeparateFiles(const std::map<std::string, std::string>& fileForBuffer) {
   auto color = fileForBuffer.find("color");
   if (color == fileForBuffer.end()) throw IoError("(arguments): a colour image is required");
   FrameBuffers frame;
-  frame.buffers["color"] = readImage(color->second, 3);
-  frame.width = frame.buffers["color"].width;
-  frame.height = frame.buffers["color"].height;
+  frame.buffers["color"] = readBufferFile(color->second, *findBufferSpec("color"), frame);
   for (const auto& [buffer, path] : fileForBuffer) {
     if (buffer == "color") continue;
     const BufferSpec* spec = findBufferSpec(buffer);
     if (!spec) fail(path, "unknown buffer name '" + buffer + "'");
-    Image image = readImage(path, spec->channels);
-    if (image.width != frame.width || image.height != frame.height)
-      fail(path, "is " + std::to_string(image.width) + "x" + std::to_string(image.height) +
-                     " but the colour image is " + std::to_string(frame.width) + "x" +
-                     std::to_string(frame.height));
-    frame.buffers[buffer] = std::move(image);
+    frame.buffers[buffer] = readBufferFile(path, *spec, frame);
   }
+  frame.sourceChannels.erase("color");  // the layer prefix of a separate file means nothing
   return frame;
 }
 
@@ -384,8 +678,12 @@ bool fitsHalf(const Image& image) {
                      [](float v) { return std::isfinite(v) && std::abs(v) <= kHalfMax; });
 }
 
-void writeImage(const std::string& path, const Image& image, bool half,
-                const std::vector<std::string>& channelNames) {
+namespace {
+
+// Writes one plain image; windows that are set place it in a larger frame.
+void writePlain(const std::string& path, const Image& image, bool half,
+                const std::vector<std::string>& channelNames, const PixelWindow& data,
+                const PixelWindow& display) {
   if (image.empty()) fail(path, "refusing to write an empty image");
   writeAtomically(path, [&](const std::string& tmp) {
     if (hasExtension(path, ".pfm")) return writePfm(tmp, path, image);
@@ -393,10 +691,200 @@ void writeImage(const std::string& path, const Image& image, bool half,
     OIIO::ImageSpec spec(image.width, image.height, image.channels,
                          half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
     if (!channelNames.empty()) spec.channelnames = channelNames;
+    if (!data.empty() && data.width == image.width && data.height == image.height &&
+        out->supports("displaywindow")) {
+      spec.x = data.x, spec.y = data.y;
+      if (!display.empty())
+        spec.full_x = display.x, spec.full_y = display.y, spec.full_width = display.width,
+        spec.full_height = display.height;
+    }
     if (!out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data()) ||
         !out->close())
       fail(path, "write failed (" + firstLine(out->geterror()) + ")");
   });
+}
+
+// The layer of a full channel name: "ViewLayer.Denoised" of "ViewLayer.Denoised.R".
+std::string layerOf(const std::string& channel) {
+  const auto dot = channel.rfind('.');
+  return dot == std::string::npos ? "" : channel.substr(0, dot);
+}
+
+// One layer to add to the output: its name and interleaved channels.
+struct AddedLayer {
+  std::string name;
+  std::vector<std::string> suffixes;
+  std::vector<const Image*> sources;  // one image per group of channels
+};
+
+std::vector<AddedLayer> addedLayers(const Image& result, const WriteOptions& options,
+                                    const PixelWindow& window, const std::string& outPath,
+                                    const std::string& sourcePath) {
+  std::vector<AddedLayer> added;
+  auto sizeCheck = [&](const std::string& layer, const Image& image) {
+    if (image.width != window.width || image.height != window.height)
+      fail(outPath, "layer '" + layer + "' size does not match " + sourcePath);
+  };
+  sizeCheck(options.layer, result);
+  AddedLayer main{options.layer, {}, {&result}};
+  static const char* rgb[] = {"R", "G", "B", "A"};
+  for (int c = 0; c < result.channels; ++c)
+    main.suffixes.push_back(result.channels <= 4 ? rgb[c] : std::to_string(c));
+  if (!options.alpha.empty() && result.channels == 3) {
+    sizeCheck(options.layer, options.alpha);
+    main.suffixes.push_back("A");
+    main.sources.push_back(&options.alpha);
+  }
+  added.push_back(main);
+  for (const auto& [name, image] : options.extraLayers) {
+    sizeCheck(name, image);
+    AddedLayer extra{name, {}, {&image}};
+    for (int c = 0; c < image.channels; ++c)
+      extra.suffixes.push_back(image.channels == 1   ? std::string("Y")
+                               : image.channels <= 4 ? std::string(rgb[c])
+                                                     : std::to_string(c));
+    added.push_back(extra);
+  }
+  return added;
+}
+
+// Value of channel k of an added layer at (x, y) in its window.
+float addedValue(const AddedLayer& layer, int k, int x, int y) {
+  for (const Image* image : layer.sources) {
+    if (k < image->channels) return image->at(x, y, k);
+    k -= image->channels;
+  }
+  return 0.0f;
+}
+
+// What one output part holds: which source part channels it copies (in
+// order) and which added layers follow them.
+struct OutputPart {
+  OIIO::ImageSpec spec;
+  int sourcePart = -1;           // -1: a new part holding added layers only
+  std::vector<int> kept;         // channel indices of the source part
+  std::vector<int> addedLayers;  // indices into the added layers
+};
+
+// A spec written as scanlines at MIP level 0 only, with the given channels.
+void makePlainScanline(OIIO::ImageSpec& spec) {
+  spec.tile_width = spec.tile_height = 0;
+  spec.tile_depth = 1;
+  spec.erase_attribute("openexr:levelmode");
+  spec.erase_attribute("openexr:roundingmode");
+  spec.alpha_channel = -1;
+  spec.z_channel = -1;
+}
+
+// The source part the result belongs in: the one with the result's data window.
+int anchorPart(const ChannelTable& table, const WriteOptions& options, const Image& result) {
+  for (std::size_t p = 0; p < table.parts.size(); ++p) {
+    const PixelWindow data = dataWindowOf(table.parts[p].spec);
+    if (!options.dataWindow.empty() ? data == options.dataWindow
+                                    : data.width == result.width && data.height == result.height)
+      return int(p);
+  }
+  return -1;
+}
+
+std::vector<OutputPart> planOutputParts(const ChannelTable& table,
+                                        const std::vector<AddedLayer>& added, int anchor,
+                                        OIIO::TypeDesc resultType) {
+  std::set<std::string> replaced;
+  for (const auto& layer : added) replaced.insert(layer.name);
+  std::vector<OutputPart> parts;
+  for (std::size_t p = 0; p < table.parts.size(); ++p) {
+    const Part& source = table.parts[p];
+    OutputPart out{source.spec, int(p), {}, {}};
+    if (out.spec.channelformats.empty())
+      out.spec.channelformats.assign(out.spec.nchannels, out.spec.format);
+    std::vector<std::string> names;
+    std::vector<OIIO::TypeDesc> formats;
+    for (int c = 0; c < source.spec.nchannels; ++c) {
+      if (replaced.count(layerOf(source.names[c]))) continue;  // an earlier result: replaced
+      out.kept.push_back(c);
+      names.push_back(source.spec.channelnames[c]);
+      formats.push_back(out.spec.channelformats[c]);
+    }
+    if (out.kept.empty()) continue;
+    out.spec.channelnames = names;
+    out.spec.channelformats = formats;
+    out.spec.nchannels = int(names.size());
+    makePlainScanline(out.spec);
+    parts.push_back(std::move(out));
+  }
+  const bool singlePart = table.parts.size() == 1 && !parts.empty();
+  for (std::size_t a = 0; a < added.size(); ++a) {
+    // Single-part files get every layer in their part; multi-part ones (Blender
+    // 5) one new part per layer, named after it, as Blender writes passes.
+    OutputPart* target = singlePart ? &parts.front() : nullptr;
+    if (!target) {
+      OutputPart fresh{table.parts[anchor].spec, -1, {}, {}};
+      fresh.spec.channelnames.clear();
+      fresh.spec.channelformats.clear();
+      fresh.spec.nchannels = 0;
+      fresh.spec.attribute("oiio:subimagename", added[a].name);
+      fresh.spec.attribute("name", added[a].name);
+      makePlainScanline(fresh.spec);
+      parts.push_back(std::move(fresh));
+      target = &parts.back();
+    }
+    for (const auto& suffix : added[a].suffixes) {
+      target->spec.channelnames.push_back(added[a].name + "." + suffix);
+      target->spec.channelformats.push_back(resultType);
+    }
+    target->spec.nchannels = int(target->spec.channelnames.size());
+    target->addedLayers.push_back(int(a));
+  }
+  return parts;
+}
+
+// Copies one output part strip by strip: the kept source channels, then the
+// added layers inside the result's window.
+void writePart(OIIO::ImageInput& in, OIIO::ImageOutput& out, const OutputPart& part,
+               const ChannelTable& table, const std::vector<AddedLayer>& added,
+               const PixelWindow& window, const std::string& sourcePath,
+               const std::string& outPath) {
+  const OIIO::ImageSpec& spec = part.spec;
+  const int rows = part.sourcePart >= 0 ? stripRows(table.parts[part.sourcePart].spec) : kStripRows;
+  const int inChannels = part.sourcePart >= 0 ? table.parts[part.sourcePart].spec.nchannels : 0;
+  std::vector<float> inStrip(static_cast<std::size_t>(spec.width) * rows * std::max(1, inChannels));
+  std::vector<float> outStrip(static_cast<std::size_t>(spec.width) * rows * spec.nchannels);
+  for (int y0 = spec.y; y0 < spec.y + spec.height; y0 += rows) {
+    const int y1 = std::min(spec.y + spec.height, y0 + rows);
+    if (part.sourcePart >= 0 && !readStrip(in, part.sourcePart, table.parts[part.sourcePart].spec,
+                                           y0, y1, 0, inChannels, inStrip.data()))
+      fail(sourcePath, "corrupt or truncated image data (" + firstLine(in.geterror()) + ")");
+    for (int y = y0; y < y1; ++y)
+      for (int x = spec.x; x < spec.x + spec.width; ++x) {
+        const std::size_t pixel = static_cast<std::size_t>(y - y0) * spec.width + (x - spec.x);
+        float* dst = &outStrip[pixel * spec.nchannels];
+        for (int k : part.kept) *dst++ = inStrip[pixel * inChannels + k];
+        const int rx = x - window.x, ry = y - window.y;
+        const bool inside = rx >= 0 && ry >= 0 && rx < window.width && ry < window.height;
+        for (int a : part.addedLayers)
+          for (std::size_t k = 0; k < added[a].suffixes.size(); ++k)
+            *dst++ = inside ? addedValue(added[a], int(k), rx, ry) : 0.0f;
+      }
+    if (!out.write_scanlines(y0, y1, spec.z, OIIO::TypeDesc::FLOAT, outStrip.data()))
+      fail(outPath, "write failed (" + firstLine(out.geterror()) + ")");
+  }
+}
+
+}  // namespace
+
+void writeImage(const std::string& path, const Image& image, bool half,
+                const std::vector<std::string>& channelNames) {
+  writePlain(path, image, half, channelNames, {}, {});
+}
+
+WriteOptions writeOptionsFor(const FrameBuffers& frame) {
+  WriteOptions options;
+  options.layer = layerPrefixOf(frame) + options.layer;
+  options.dataWindow = frame.dataWindow;
+  options.displayWindow = frame.displayWindow;
+  options.alpha = frame.alpha;
+  return options;
 }
 
 void writeResult(const std::string& sourcePath, const std::string& outPath, const Image& result,
@@ -405,67 +893,30 @@ void writeResult(const std::string& sourcePath, const std::string& outPath, cons
   if (!allowOverwriteSource && fs::exists(outPath, ec) && fs::equivalent(sourcePath, outPath, ec))
     fail(outPath, "is the input file; refusing to overwrite it (use --inplace)");
   if (options.rgbOnly) {
-    writeImage(outPath, result, options.half, {"R", "G", "B"});
+    writePlain(outPath, result, options.half, {"R", "G", "B"}, options.dataWindow,
+               options.displayWindow);
     return;
   }
 
   auto in = openInput(sourcePath);
   ChannelTable table = scanChannels(*in, sourcePath);
+  const int anchor = anchorPart(table, options, result);
+  if (anchor < 0) fail(outPath, "layer '" + options.layer + "' size does not match " + sourcePath);
+  const PixelWindow window = dataWindowOf(table.parts[anchor].spec);
+  const auto added = addedLayers(result, options, window, outPath, sourcePath);
   const OIIO::TypeDesc resultType = options.half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT;
-
-  // Output part 0: every source channel, then the result and the extra layers.
-  std::vector<std::pair<std::string, const Image*>> added = {{options.layer, &result}};
-  for (const auto& [name, image] : options.extraLayers) added.emplace_back(name, &image);
-  std::vector<OIIO::ImageSpec> specs = table.specs;
-  OIIO::ImageSpec& main = specs[0];
-  if (main.channelformats.empty()) main.channelformats.assign(main.nchannels, main.format);
-  const int sourceChannels = main.nchannels;
-  for (const auto& [layer, image] : added) {
-    if (image->width != main.width || image->height != main.height)
-      fail(outPath, "layer '" + layer + "' size does not match " + sourcePath);
-    static const char* rgb[] = {"R", "G", "B", "A"};
-    for (int c = 0; c < image->channels; ++c) {
-      std::string suffix = image->channels <= 4 ? rgb[c] : std::to_string(c);
-      if (image->channels == 1) suffix = "Y";
-      main.channelnames.push_back(layer + "." + suffix);
-      main.channelformats.push_back(resultType);
-    }
-    main.nchannels += image->channels;
-  }
-  main.alpha_channel = -1;
-  main.z_channel = -1;
+  const std::vector<OutputPart> parts = planOutputParts(table, added, anchor, resultType);
 
   writeAtomically(outPath, [&](const std::string& tmp) {
     auto out = createOutput(tmp, outPath);
+    std::vector<OIIO::ImageSpec> specs;
+    for (const auto& p : parts) specs.push_back(p.spec);
     if (!out->open(tmp, static_cast<int>(specs.size()), specs.data()))
       fail(outPath, "cannot open for writing (" + firstLine(out->geterror()) + ")");
-    for (std::size_t s = 0; s < specs.size(); ++s) {
-      const OIIO::ImageSpec& spec = specs[s];
-      if (s > 0 && !out->open(tmp, spec, OIIO::ImageOutput::AppendSubimage))
+    for (std::size_t s = 0; s < parts.size(); ++s) {
+      if (s > 0 && !out->open(tmp, parts[s].spec, OIIO::ImageOutput::AppendSubimage))
         fail(outPath, "cannot add part (" + firstLine(out->geterror()) + ")");
-      const int inChannels = s == 0 ? sourceChannels : spec.nchannels;
-      std::vector<float> inStrip(static_cast<std::size_t>(spec.width) * kStripRows * inChannels);
-      std::vector<float> outStrip(static_cast<std::size_t>(spec.width) * kStripRows *
-                                  spec.nchannels);
-      for (int y0 = 0; y0 < spec.height; y0 += kStripRows) {
-        int y1 = std::min(spec.height, y0 + kStripRows);
-        if (!in->read_scanlines(static_cast<int>(s), 0, spec.y + y0, spec.y + y1, 0, 0, inChannels,
-                                OIIO::TypeDesc::FLOAT, inStrip.data()))
-          fail(sourcePath, "corrupt or truncated image data (" + firstLine(in->geterror()) + ")");
-        for (int y = y0; y < y1; ++y)
-          for (int x = 0; x < spec.width; ++x) {
-            std::size_t row = static_cast<std::size_t>(y - y0) * spec.width + x;
-            float* dst = &outStrip[row * spec.nchannels];
-            std::copy_n(&inStrip[row * inChannels], inChannels, dst);
-            int c = inChannels;
-            if (s == 0)
-              for (const auto& [layer, image] : added)
-                for (int k = 0; k < image->channels; ++k) dst[c++] = image->at(x, y, k);
-          }
-        if (!out->write_scanlines(spec.y + y0, spec.y + y1, 0, OIIO::TypeDesc::FLOAT,
-                                  outStrip.data()))
-          fail(outPath, "write failed (" + firstLine(out->geterror()) + ")");
-      }
+      writePart(*in, *out, parts[s], table, added, window, sourcePath, outPath);
     }
     if (!out->close()) fail(outPath, "write failed (" + firstLine(out->geterror()) + ")");
   });

@@ -5,35 +5,73 @@
 namespace dn {
 
 const std::vector<BufferSpec>& canonicalBuffers() {
-  // Layer names are tried in order: Blender/Cycles first, then common names
-  // used by other renderers and by oidnDenoise-style pipelines.
+  // Layer names are tried in order, in the chosen view layer (Blender) or at
+  // the top level. Where they come from (docs/dndenoise.md has the table):
+  //   Blender/Cycles 3.x: Combined, Denoising Albedo/Normal/Depth, DiffDir, ...
+  //   Blender 5 (and 4.x that writes full names): Diffuse Direct, Glossy
+  //     Indirect, Transmission Color, Emission, Environment, one part each;
+  //   Arnold: RGBA, albedo / denoise_albedo, N, Z, diffuse_albedo,
+  //     specular_albedo, transmission_albedo, emission, background;
+  //   RenderMan: Ci, albedo, normal / Nn, z / zfiltered;
+  //   Karma/Mantra (Houdini): C, albedo, N, Pz;
+  //   V-Ray: plain RGB, VRayNormals, VRayBumpNormals;
+  //   pbrt-v4 (gbuffer film): R,G,B, Albedo, Ns (shading normal), Variance;
+  //   Mitsuba 3 (aov integrator, names as its docs use them): R,G,B,
+  //     albedo, nn / sh_normal (X,Y,Z), dd.y / depth (T).
+  // Other renderers' light-path AOVs (Arnold diffuse_direct and
+  // transmission_direct, Karma directdiffuse, ...) include the surface colour,
+  // which Cycles' light passes do not (Cycles: diffuse = (DiffDir + DiffInd) x
+  // DiffCol), so they are not taken for Cycles' passes; --channels maps them
+  // where they match.
   static const std::vector<BufferSpec> specs = {
       {"color",
        3,
        // Cycles writes "Noisy Image" when its own denoiser ran: Combined is
        // then already denoised.
-       {"Noisy Image", "Combined", "", "rgba", "RGBA", "beauty", "color", "Ci"},
+       {"Noisy Image", "Combined", "", "rgba", "RGBA", "beauty", "Beauty", "color", "Ci", "C"},
        "noisy radiance (HDR, linear)"},
-      {"albedo", 3, {"Denoising Albedo", "albedo", "Albedo", "alb"}, "first-hit albedo"},
-      {"normal", 3, {"Denoising Normal", "normal", "Normal", "N", "nrm"}, "first-hit normal"},
-      {"depth", 1, {"Denoising Depth", "Depth", "depth", "Z"}, "camera distance"},
-      {"diffuse_direct", 3, {"DiffDir", "diffuse_direct"}, "direct diffuse light"},
-      {"diffuse_indirect", 3, {"DiffInd", "diffuse_indirect"}, "indirect diffuse light"},
-      {"diffuse_color", 3, {"DiffCol", "diffuse_color", "diffuse_albedo"}, "diffuse colour"},
-      {"glossy_direct", 3, {"GlossDir", "glossy_direct", "specular_direct"}, "direct glossy light"},
+      {"albedo",
+       3,
+       {"Denoising Albedo", "albedo", "Albedo", "denoise_albedo", "alb"},
+       "first-hit albedo"},
+      {"normal",
+       3,
+       {"Denoising Normal", "Normal", "normal", "Ns", "N", "Nn", "nn", "sh_normal", "normals",
+        "VRayNormals", "VRayBumpNormals", "nrm"},
+       "first-hit normal"},
+      {"depth",
+       1,
+       {"Denoising Depth", "Depth", "depth", "dd.y", "Z", "z", "zfiltered", "Pz"},
+       "camera distance"},
+      {"diffuse_direct", 3, {"DiffDir", "Diffuse Direct"}, "direct diffuse light"},
+      {"diffuse_indirect", 3, {"DiffInd", "Diffuse Indirect"}, "indirect diffuse light"},
+      {"diffuse_color",
+       3,
+       {"DiffCol", "Diffuse Color", "diffuse_color", "diffuse_albedo"},
+       "diffuse colour"},
+      {"glossy_direct", 3, {"GlossDir", "Glossy Direct", "glossy_direct"}, "direct glossy light"},
       {"glossy_indirect",
        3,
-       {"GlossInd", "glossy_indirect", "specular_indirect"},
+       {"GlossInd", "Glossy Indirect", "glossy_indirect"},
        "indirect glossy light"},
-      {"glossy_color", 3, {"GlossCol", "glossy_color", "specular_albedo"}, "glossy colour"},
-      {"transmission_direct", 3, {"TransDir", "transmission_direct"}, "direct transmitted light"},
+      {"glossy_color",
+       3,
+       {"GlossCol", "Glossy Color", "glossy_color", "specular_albedo"},
+       "glossy colour"},
+      {"transmission_direct", 3, {"TransDir", "Transmission Direct"}, "direct transmitted light"},
       {"transmission_indirect",
        3,
-       {"TransInd", "transmission_indirect"},
+       {"TransInd", "Transmission Indirect"},
        "indirect transmitted light"},
-      {"transmission_color", 3, {"TransCol", "transmission_color"}, "transmission colour"},
-      {"emission", 3, {"Emit", "emission"}, "emitted light"},
-      {"environment", 3, {"Env", "environment", "background"}, "directly visible environment"},
+      {"transmission_color",
+       3,
+       {"TransCol", "Transmission Color", "transmission_color", "transmission_albedo"},
+       "transmission colour"},
+      {"emission", 3, {"Emit", "Emission", "emission"}, "emitted light"},
+      {"environment",
+       3,
+       {"Env", "Environment", "environment", "background"},
+       "directly visible environment"},
       {"roughness", 1, {"roughness", "Roughness"}, "shader AOV: roughness"},
       {"metallic", 1, {"metallic", "Metallic"}, "shader AOV: metallic"},
       {"transmission", 1, {"transmission", "Transmission"}, "shader AOV: transmission weight"},

@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "dn/io/buffers.h"
 #include "dn/image.h"
+#include "dn/io/buffers.h"
 
 namespace dn {
 
@@ -24,14 +24,26 @@ struct ReadOptions {
   std::map<std::string, std::vector<std::string>> overrides;
   // Buffers to load; empty loads every canonical buffer the file has.
   std::vector<std::string> only;
-  // Multilayer files with several view layers: the one to use ("" = the first found).
+  // The view layer of a multilayer file to read, e.g. "ViewLayer.001" (names
+  // may hold dots and spaces). "": the file's only one; with several (Blender's
+  // "Composite" aside) reading fails with a line that lists them.
   std::string viewLayer;
 };
+
+// The view layers of a multilayer file, sorted: the prefixes in front
+// of a colour pass ("ViewLayer" of "ViewLayer.Combined.R"). Empty for files
+// without view layers.
+std::vector<std::string> viewLayers(const std::string& path);
 
 // Parses "albedo=diffuse.R,diffuse.G,diffuse.B" into an override entry.
 std::pair<std::string, std::vector<std::string>> parseChannelOverride(const std::string& text);
 
 // One frame from a single (usually multilayer) image file. "color" is required.
+// Any file OpenImageIO reads: scanline or tiled, MIP-mapped (level 0 is read),
+// any compression, half or float, single- or multi-part. Buffers are read in
+// the colour's data window; parts with another data window are placed by
+// pixel coordinates (zeros outside them), parts with another display window
+// are another image (a preview) and are not used.
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options = {});
 
 // The canonical buffers readFrame would find in the file (options.only aside),
@@ -58,13 +70,27 @@ bool fitsHalf(const Image& image);
 
 struct WriteOptions {
   bool half = true;                          // half or float pixels for the result channels
-  std::string layer = "Denoised";            // result layer name: "<layer>.R/G/B"
+  std::string layer = "Denoised";            // result layer name: "<layer>.R/G/B(/A)"
   bool rgbOnly = false;                      // plain RGB file, no other layers or metadata
   std::map<std::string, Image> extraLayers;  // more named layers, e.g. "uncertainty"
+  // Where the result sits (the frame's data and display windows; empty: the
+  // source part of the result's size) and the alpha it carries (empty: none).
+  PixelWindow dataWindow;
+  PixelWindow displayWindow;
+  Image alpha;
 };
 
+// WriteOptions that place the result where `frame` was read from, as layer
+// "Denoised" in its view layer, carrying its colour's alpha.
+WriteOptions writeOptionsFor(const FrameBuffers& frame);
+
 // Writes `result` as a named layer next to every layer and the metadata of
-// `sourcePath` (or as plain RGB). Atomic: a temporary file is renamed into place.
+// `sourcePath` (or as plain RGB), keeping every part and its data window. A
+// layer of that name already in the source (a Denoised layer from an earlier
+// run, or Combined given as --layer) is replaced, not duplicated. A
+// single-part source gets the layer in its part, a multi-part one (Blender 5)
+// a new part named after the layer. Tiled and MIP-mapped sources are written
+// as scanline files (level 0). Atomic: a temporary file is renamed into place.
 // Refuses to write over `sourcePath` unless allowOverwriteSource is set.
 void writeResult(const std::string& sourcePath, const std::string& outPath, const Image& result,
                  const WriteOptions& options, bool allowOverwriteSource = false);

@@ -31,11 +31,35 @@ const BufferSpec* findBufferSpec(const std::string& name);  // nullptr if unknow
 // and the diffuse, glossy and transmission light passes (direct, indirect, colour).
 const std::vector<std::string>& defaultAuxBuffers();
 
-// One frame's buffers by canonical name. Every image has the same width/height.
+// A rectangle of pixels in a file's coordinates, as OpenEXR's data window (the
+// pixels stored) and display window (the whole frame) are given.
+struct PixelWindow {
+  int x = 0;
+  int y = 0;
+  int width = 0;
+  int height = 0;
+  bool empty() const { return width <= 0 || height <= 0; }
+  bool operator==(const PixelWindow& o) const {
+    return x == o.x && y == o.y && width == o.width && height == o.height;
+  }
+  bool operator!=(const PixelWindow& o) const { return !(*this == o); }
+};
+
+// One frame's buffers by canonical name. Every image has the same width/height:
+// the data window of the colour (a border render is smaller than its display
+// window, an overscan render larger).
 struct FrameBuffers {
   int width = 0;
   int height = 0;
+  PixelWindow dataWindow;     // where the buffers' pixels sit in the frame
+  PixelWindow displayWindow;  // the whole frame
   std::map<std::string, Image> buffers;
+  // The colour's alpha (one channel), empty when the colour has none: the
+  // result layer carries it.
+  Image alpha;
+  // One line each: what the reader assumed or decoded (e.g. normals stored as
+  // (n + 1) / 2), for -v and the caller's warnings.
+  std::vector<std::string> notes;
   // Where each buffer came from: the file's channel names, e.g.
   // {"ViewLayer.Combined.R", ...}; empty for synthesized buffers.
   std::map<std::string, std::vector<std::string>> sourceChannels;
