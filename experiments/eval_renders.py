@@ -121,11 +121,13 @@ class Oidn:
 
 
 def renders(data, sets):
+    found = []
     for set_name in sets:
-        for path in sorted(glob.glob(os.path.join(data, set_name, "*", "spp*.exr"))):
+        for path in glob.glob(os.path.join(data, set_name, "*", "spp*.exr")):
             m = re.fullmatch(r"spp(\d+)\.exr", os.path.basename(path))
             if m:
-                yield set_name, os.path.basename(os.path.dirname(path)), int(m.group(1)), path
+                found.append((set_name, os.path.basename(os.path.dirname(path)), int(m.group(1)), path))
+    return sorted(found)
 
 
 def denoised(oidn, data, buffers, set_name, scene, spp, inputs):

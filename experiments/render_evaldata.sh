@@ -7,14 +7,17 @@
 #   experiments/render_evaldata.sh [OUT]      (default: $EVALDATA, else /work/evaldata)
 #   make -C experiments evaldata EVALDATA=OUT
 #
-# Settings from the environment: RES (192x192), REF_SPP (1024), SPPS ("4 16 64"), THREADS (2),
-# RENDER_VENV (/work/venv-render). Every noisy render comes first, then the references (the slow
-# part). Resumable: finished files are kept, a render is written under a temporary name.
+# Settings from the environment: RES (192x192), BLENDER_REF_SPP (1024), MITSUBA_REF_SPP (512),
+# SPPS ("4 16 64"), THREADS (2), RENDER_VENV (/work/venv-render). Every noisy render comes
+# first, then the references (the slow part: about 5 CPU-minutes for each Blender one, 1.7 for
+# each Mitsuba one). Resumable: finished files are kept, a render is written under a temporary
+# name.
 set -euo pipefail
 
 out=${1:-${EVALDATA:-/work/evaldata}}
 res=${RES:-192x192}
-ref_spp=${REF_SPP:-1024}
+blender_ref_spp=${BLENDER_REF_SPP:-1024}
+mitsuba_ref_spp=${MITSUBA_REF_SPP:-512}
 read -r -a spps <<<"${SPPS:-4 16 64}"
 threads=${THREADS:-2}
 venv=${RENDER_VENV:-/work/venv-render}
@@ -28,8 +31,8 @@ py="$venv/bin/python"
 
 # One job: "SET SCENE"; its command renders that scene's files of one phase.
 jobs=()
-for s in "${blender_scenes[@]}"; do jobs+=("blender5 $s"); done
 for s in "${mitsuba_scenes[@]}"; do jobs+=("mitsuba_box $s" "mitsuba_gauss $s"); done
+for s in "${blender_scenes[@]}"; do jobs+=("blender5 $s"); done
 total=$((2 * ${#jobs[@]}))
 
 command_for() {  # SET SCENE DIR: the renderer's command line, without the sample counts
@@ -52,7 +55,7 @@ run_phase() {  # PHASE: noisy or ref
       args=(--spp "${spps[@]}" --ref-spp 0)
     else
       files=("$dir/ref.exr")
-      args=(--spp --ref-spp "$ref_spp")
+      args=(--spp --ref-spp "$([[ $set == blender5 ]] && echo "$blender_ref_spp" || echo "$mitsuba_ref_spp")")
     fi
     local missing=0
     for f in "${files[@]}"; do [[ -f $f ]] || missing=1; done

@@ -18,7 +18,7 @@ from film.bitmap(): R G B A (the colour), integrator.R/G/B/A (the nested path
 integrator's copy of it), albedo.R/G/B, normals.X/Y/Z (world space, [-1, 1]).
 
   RENDER_VENV/bin/python experiments/render_mitsuba.py --scene cornell --filter box \
-      --out DIR --res 192x192 --spp 4 16 64 --ref-spp 1024 --threads 1
+      --out DIR --res 192x192 --spp 4 16 64 --ref-spp 512 --threads 2
 
 writes DIR/spp<N>.exr (seed N) and DIR/ref.exr (seed 7919), each under a temporary
 name renamed when complete; existing files are skipped. --half: half floats.
@@ -50,7 +50,7 @@ def parse_args():
     p.add_argument("--res", default="192x192", help="WIDTHxHEIGHT")
     p.add_argument("--spp", type=int, nargs="*", default=[4, 16, 64])
     p.add_argument("--ref-spp", type=int, default=1024, help="0: no reference")
-    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--threads", type=int, default=2, help="at least 2 (see main)")
     p.add_argument("--half", action="store_true", help="half-float channels (default: float)")
     return p.parse_args()
 
@@ -219,7 +219,8 @@ def render(scene, path, spp, seed, half):
 def main():
     args = parse_args()
     import drjit as dr
-    dr.set_thread_count(args.threads)
+    # With a pool of one thread, Mitsuba 3.9's scalar variant hangs while loading an envmap.
+    dr.set_thread_count(max(args.threads, 2))
     os.makedirs(args.out, exist_ok=True)
     width, height = (int(v) for v in args.res.split("x"))
     scene = build(args.scene, width, height, args.filter)
