@@ -26,7 +26,7 @@ render() {  # NAME RENDERER-ARGS...: renders NAME's 4 spp and reference into OUT
     return
   fi
   "$py" "$@" --out "$tmp/$name" --spp 4 --ref-spp 2048 --threads "$threads" --half 2>&1 |
-    grep -E '^render_(blender5|mitsuba)' || true
+    grep -E 'render_(blender5|mitsuba): ' || true
   mv "$tmp/$name/spp4.exr" "$out/${name}_4spp.exr"
   mv "$tmp/$name/ref.exr" "$out/${name}_ref.exr"
 }

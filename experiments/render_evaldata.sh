@@ -66,7 +66,7 @@ run_phase() {  # PHASE: noisy or ref
     echo "render_evaldata: [$step/$total] $set/$scene $phase: rendering ($(date -u +%H:%M:%S))"
     local start=$SECONDS
     # shellcheck disable=SC2046  # the command line is split on purpose
-    $(command_for "$set" "$scene" "$dir") "${args[@]}" 2>&1 | grep -E '^render_(blender5|mitsuba)|Error|error' || true
+    $(command_for "$set" "$scene" "$dir") "${args[@]}" 2>&1 | grep -E 'render_(blender5|mitsuba): |Error|error' || true
     for f in "${files[@]}"; do
       [[ -f $f ]] || { echo "render_evaldata: $f was not written" >&2; exit 1; }
     done
