@@ -13,8 +13,10 @@ reused). Buffers are found by name: Blender's `<layer>.Combined`, `.Denoising Al
 
 Metrics, as dnmetrics defines them: PSNR on Reinhard v / (1 + v) clipped to [0, 1], peak 1;
 FLIP (LDR, flip_evaluator at 67 pixels per degree) on Reinhard then sRGB. The noise
-autocorrelation is that of d = tonemap(render) - tonemap(reference), Reinhard, between
-horizontal and vertical neighbours, averaged over both directions and the 3 channels.
+autocorrelation is that of d = render - reference between horizontal and vertical
+neighbours, averaged over both directions and the 3 channels, on linear radiance and on
+Reinhard-tonemapped values (less driven by fireflies, but at 4 spp the tonemap's bias
+adds a smooth, positively correlated part).
 Prints one line per render and a Markdown table of means per set and spp.
 """
 
@@ -75,8 +77,10 @@ def flip(ref, test):
     return float(flip_evaluator.evaluate(srgb(ref), srgb(test), "LDR")[1])
 
 
-def lag1_autocorrelation(render, ref):
-    d = reinhard(render) - reinhard(ref)
+def lag1_autocorrelation(render, ref, tonemap):
+    """Correlation of the noise d = render - ref between horizontal and vertical neighbours,
+    averaged over both directions and the 3 channels; of Reinhard-tonemapped values if tonemap."""
+    d = reinhard(render) - reinhard(ref) if tonemap else (render - ref).astype(np.float64)
     d = d - d.mean(axis=(0, 1))
     var = float(np.sum(d * d))
     if var == 0.0:
@@ -149,7 +153,7 @@ def main():
     oidn = Oidn(args.threads)
     rows = {}
     methods = ["noisy"] + [f"oidn_{b}" for b in BUFFER_SETS]
-    print("%-32s %6s " % ("render", "rho1") + " ".join("%14s" % m for m in methods))
+    print("%-32s %6s %6s " % ("render", "rho", "rho_tm") + " ".join("%14s" % m for m in methods))
     for set_name, scene, spp, path in renders(args.data, args.sets):
         ref_path = os.path.join(os.path.dirname(path), "ref.exr")
         if not os.path.exists(ref_path):
@@ -164,16 +168,16 @@ def main():
         for buffers in BUFFER_SETS:
             results[f"oidn_{buffers}"] = denoised(oidn, args.data, buffers, set_name, scene, spp, inputs)
         scores = {m: (psnr(ref, img), None if args.no_flip else flip(ref, img)) for m, img in results.items()}
-        rho = lag1_autocorrelation(inputs[0], ref)
+        rho = (lag1_autocorrelation(inputs[0], ref, False), lag1_autocorrelation(inputs[0], ref, True))
         rows.setdefault((set_name, spp), []).append((rho, scores))
-        print("%-32s %6.3f " % (f"{set_name}/{scene}/spp{spp}", rho) + " ".join(
+        print("%-32s %6.3f %6.3f " % ((f"{set_name}/{scene}/spp{spp}",) + rho) + " ".join(
             "%6.2f %7s" % (scores[m][0], "" if scores[m][1] is None else "%.4f" % scores[m][1]) for m in methods),
             flush=True)
     print_table(rows, methods, args.no_flip)
 
 
 def print_table(rows, methods, no_flip):
-    print("\n| set | spp | scenes | noise lag-1 autocorr. | " + " | ".join(
+    print("\n| set | spp | scenes | noise lag-1 autocorr. (linear / Reinhard) | " + " | ".join(
         f"{m} PSNR" + ("" if no_flip else f" / FLIP") for m in methods) + " |")
     print("|---|---|---|---|" + "---|" * len(methods))
     for (set_name, spp), entries in sorted(rows.items(), key=lambda kv: (kv[0][0], kv[0][1])):
@@ -181,8 +185,8 @@ def print_table(rows, methods, no_flip):
         for m in methods:
             p = np.mean([e[1][m][0] for e in entries])
             cells.append("%.2f" % p if no_flip else "%.2f / %.4f" % (p, np.mean([e[1][m][1] for e in entries])))
-        rho = np.mean([e[0] for e in entries])
-        print(f"| {set_name} | {spp} | {len(entries)} | {rho:.3f} | " + " | ".join(cells) + " |")
+        rho = np.mean([e[0][0] for e in entries]), np.mean([e[0][1] for e in entries])
+        print(f"| {set_name} | {spp} | {len(entries)} | {rho[0]:.3f} / {rho[1]:.3f} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":
