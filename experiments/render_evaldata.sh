@@ -8,10 +8,10 @@
 #   make -C experiments evaldata EVALDATA=OUT
 #
 # Settings from the environment: RES (192x192), BLENDER_REF_SPP (1024), MITSUBA_REF_SPP (512),
-# SPPS ("4 16 64"), THREADS (2), RENDER_VENV (/work/venv-render). Every noisy render comes
-# first, then the references (the slow part: about 5 CPU-minutes for each Blender one, 1.7 for
-# each Mitsuba one). Resumable: finished files are kept, a render is written under a temporary
-# name.
+# SPPS ("4 16 64"), THREADS (2), RENDER_VENV (/work/venv-render), ONLY (some SET/SCENE jobs).
+# Every noisy render comes first, then the references (the slow part: about 5 CPU-minutes for
+# each Blender one, 1.7 for each Mitsuba one). Resumable: finished files are kept, a render is
+# written under a temporary name.
 set -euo pipefail
 
 out=${1:-${EVALDATA:-/work/evaldata}}
@@ -31,8 +31,12 @@ py="$venv/bin/python"
 
 # One job: "SET SCENE"; its command renders that scene's files of one phase.
 jobs=()
-for s in "${mitsuba_scenes[@]}"; do jobs+=("mitsuba_box $s" "mitsuba_gauss $s"); done
-for s in "${blender_scenes[@]}"; do jobs+=("blender5 $s"); done
+if [[ -n ${ONLY:-} ]]; then  # e.g. ONLY="mitsuba_gauss/lanterns blender5/exterior": these, in this order
+  for job in $ONLY; do jobs+=("${job%%/*} ${job#*/}"); done
+else
+  for s in "${mitsuba_scenes[@]}"; do jobs+=("mitsuba_gauss $s" "mitsuba_box $s"); done
+  for s in "${blender_scenes[@]}"; do jobs+=("blender5 $s"); done
+fi
 total=$((2 * ${#jobs[@]}))
 
 command_for() {  # SET SCENE DIR: the renderer's command line, without the sample counts
