@@ -21,15 +21,16 @@ def fail(message):
 
 
 def read_channels(path):
-    """All channels of a single-part EXR as {full name: 2-D array}, plus the header."""
+    """All channels of an EXR (every part of a multi-part file) as {full name: 2-D array}, plus the header."""
     if not os.path.isfile(path):
         raise ExrError(f"{path}: no such file")
     try:
         exr = OpenEXR.File(path, separate_channels=True)
     except Exception as error:  # the module raises plain exceptions on unreadable files
         raise ExrError(f"{path}: not a readable EXR ({error})") from error
-    channels = {name: channel.pixels for name, channel in exr.channels().items()}
-    return channels, exr.header()
+    # Blender 4.x/5.x multilayer files hold one part per pass: the channels of every part.
+    channels = {name: channel.pixels for part in exr.parts for name, channel in part.channels.items()}
+    return channels, exr.parts[0].header
 
 
 def color_names(channels, path="(image)"):
