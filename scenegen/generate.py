@@ -23,8 +23,8 @@ import random
 import sys
 import time
 
-import bmesh
-import bpy
+import bpy  # first: with the bpy module (Blender 5 from PyPI) bmesh and mathutils come with it
+import bmesh  # noqa: I100
 from mathutils import Euler, Matrix, Vector
 
 GENERATOR_VERSION = "2.0.0"
@@ -117,6 +117,13 @@ def set_enum(owner, prop, *values):
     raise KeyError("%s.%s accepts none of %s" % (owner.bl_rna.identifier, prop, ", ".join(values)))
 
 
+def set_file_format(image_settings, file_format):
+    """Blender 5 picks the media type (single or multilayer image) before the format."""
+    if hasattr(image_settings, "media_type"):
+        image_settings.media_type = "MULTI_LAYER_IMAGE" if file_format == "OPEN_EXR_MULTILAYER" else "IMAGE"
+    image_settings.file_format = file_format
+
+
 def set_any(owner, props, value):
     """Sets the first of props that owner has; the value is drawn either way (same scene on every Blender)."""
     for prop in props:
@@ -150,7 +157,7 @@ def configure_render(scene, args):
     scene.render.film_transparent = False
     scene.render.use_motion_blur = False
     scene.render.use_file_extension = False
-    scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    set_file_format(scene.render.image_settings, "OPEN_EXR_MULTILAYER")
     scene.render.image_settings.exr_codec = args.codec
     scene.render.image_settings.color_depth = "16"
 
@@ -1234,7 +1241,7 @@ def luminance_probe(scene, seed, probe_res=32, samples=16):
     saved = (scene.render.resolution_x, scene.render.resolution_y, scene.render.image_settings.file_format,
              scene.render.image_settings.color_depth)
     scene.render.resolution_x = scene.render.resolution_y = probe_res
-    scene.render.image_settings.file_format = "OPEN_EXR"
+    set_file_format(scene.render.image_settings, "OPEN_EXR")
     scene.render.image_settings.color_depth = "32"
     path = os.path.join(bpy.app.tempdir, "probe_%d.exr" % seed)
     render_to(path, scene, samples, derived_seed("probe", seed), "32")
@@ -1242,8 +1249,9 @@ def luminance_probe(scene, seed, probe_res=32, samples=16):
     px = list(img.pixels)
     bpy.data.images.remove(img)
     os.remove(path)
-    (scene.render.resolution_x, scene.render.resolution_y, scene.render.image_settings.file_format,
-     scene.render.image_settings.color_depth) = saved
+    scene.render.resolution_x, scene.render.resolution_y = saved[:2]
+    set_file_format(scene.render.image_settings, saved[2])
+    scene.render.image_settings.color_depth = saved[3]
     return [0.2126 * px[i] + 0.7152 * px[i + 1] + 0.0722 * px[i + 2] for i in range(0, len(px), 4)]
 
 

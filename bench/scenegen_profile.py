@@ -1,0 +1,90 @@
+#!/usr/bin/env python3
+"""Frames per hour of the data set generator, and where its time goes.
+
+  python3 bench/scenegen_profile.py --out /tmp/prof --seeds 1000-1029 [make_dataset.py options]
+
+Renders the seeds with scenegen/make_dataset.py --profile (options after the known
+ones go to it; defaults are the training set's: 128x128, 16 x 4 spp, 2 x 256-spp
+ground truth, 2 frames, 2 threads), then prints wall and CPU time, frames per hour as
+measured and as if the cores were free (CPU seconds / threads: the machine may be
+shared), and a table of the phases per frame: Blender start-up (process start to the
+script running), scene build (Python: geometry, materials, camera search), exposure
+probe (a 32x32 render: kernel load, scene sync and BVH build happen here), sampling
+of the stacks and of the ground truths, EXR writes (one multilayer file timed again
+per frame, times the files per frame) and the rest (driver, manifest, checks).
+"""
+
+import argparse
+import glob
+import json
+import os
+import re
+import resource
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def seed_list(text):
+    if "-" in text:
+        lo, hi = (int(x) for x in text.split("-"))
+        return ",".join(str(s) for s in range(lo, hi + 1))
+    return text
+
+
+def main(argv):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="a fresh folder")
+    p.add_argument("--seeds", default="1000-1029", help="A-B or a comma list")
+    args, extra = p.parse_known_args(argv)
+    defaults = {"--res": "128", "--spp": "4", "--stacks": "16", "--gt-spp": "256", "--frames": "2",
+                "--threads": "2", "--batch": "20"}
+    for key, value in defaults.items():
+        if key not in extra:
+            extra += [key, value]
+    threads = int(extra[extra.index("--threads") + 1])
+    cmd = [sys.executable, os.path.join(ROOT, "scenegen", "make_dataset.py"), "--out", args.out,
+           "--seeds", seed_list(args.seeds), "--profile"] + extra
+    print("$ " + " ".join(cmd), file=sys.stderr)
+    load0 = os.getloadavg()[0]
+    t0 = time.time()
+    subprocess.run(cmd, check=True)
+    wall = time.time() - t0
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = usage.ru_utime + usage.ru_stime
+
+    metas = [json.load(open(m)) for m in glob.glob(os.path.join(args.out, "*", "scene_*", "frame_*", "meta.json"))]
+    if not metas:
+        sys.exit("scenegen_profile.py: no frames were rendered")
+    n = len(metas)
+    scenes = {m["seed"]: m for m in metas}
+    startup = sum(float(x) for log in glob.glob(os.path.join(args.out, "logs", "batch_*.log"))
+                  for x in re.findall(r"start-up ([0-9.]+) s", open(log).read()))
+    build = sum(m["scene_build_seconds"] for m in scenes.values())
+    probe = sum(m["probe_seconds"] for m in scenes.values())
+    stacks = sum(v for m in metas for k, v in m["render_seconds"].items() if k.startswith("spp") and v)
+    gts = sum(v for m in metas for k, v in m["render_seconds"].items() if k.startswith("gt") and v)
+    writes = sum(m["exr_write_seconds"] * len(m["files"]) for m in metas)
+    phases = [("Blender start-up", startup), ("scene build (Python)", build),
+              ("exposure probe (kernel load, sync, BVH)", probe),
+              ("stacks: sampling", stacks - writes * metas[0]["stacks"] / len(metas[0]["files"])),
+              ("ground truth: sampling", gts - writes * (len(metas[0]["files"]) - metas[0]["stacks"])
+               / len(metas[0]["files"])),
+              ("EXR writes", writes)]
+    phases.append(("rest (driver, checks, manifest)", wall - sum(v for _, v in phases)))
+    print("%d frames of %d scenes in %.0f s wall, %.0f s CPU; load average %.1f at the start, %.1f at the end"
+          % (n, len(scenes), wall, cpu, load0, os.getloadavg()[0]))
+    print("frames per hour: %.0f measured; %.0f with %d free cores (CPU seconds / %d)"
+          % (3600 * n / wall, 3600 * n / (cpu / threads), threads, threads))
+    print("| phase | s per frame (wall) | share |")
+    print("|---|---|---|")
+    for name, seconds in phases:
+        print("| %s | %.2f | %.0f%% |" % (name, seconds / n, 100 * seconds / wall))
+    print("| total | %.2f | 100%% |" % (wall / n))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
