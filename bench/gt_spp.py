@@ -8,8 +8,8 @@ Renders, with scenegen/make_dataset.py, the seeds' frame 0 four ways: the data s
 at each other count (own render seeds, --seed-tag), and one --ref-spp reference
 (--seed-tag ref). Then prints, per frame and on average, the error against the reference
 of the training target (mean of gt_a and gt_b) at each count, of the 64-spp input (mean
-of the 16 stacks) and of OIDN on that input (colour + albedo + normal, when pyoidn is
-installed): relMSE = mean((x - ref)^2 / (ref^2 + 0.01)) and PSNR after x / (1 + x).
+of the 16 stacks), and of OIDN (colour + albedo + normal, quality high, when pyoidn is
+installed) on each target (a stand-in for cleansing) and on that input: relMSE = mean((x - ref)^2 / (ref^2 + 0.01)) and PSNR after x / (1 + x).
 The reference's own noise is included in every number (about N / ref_spp of a target's).
 """
 
@@ -44,19 +44,19 @@ def psnr(x, ref):
     return float(10 * np.log10(1.0 / max(np.mean((a - b) ** 2), 1e-12)))
 
 
-def oidn_64(frame_dir):
+def oidn_mean(frame_dir, names):
+    """OIDN (quality high, colour + albedo + normal) on the mean of the named files; None without pyoidn."""
     try:
-        sys.path.insert(0, os.path.join(ROOT, "experiments"))
         from oidn_denoise import Denoiser
     except ImportError:
         return None
     color, albedo, normal = 0, 0, 0
-    for i in range(16):
-        ch, _ = read_channels(os.path.join(frame_dir, "spp4_%02d.exr" % i))
+    for name in names:
+        ch, _ = read_channels(os.path.join(frame_dir, name))
         color = color + find_channels(ch, "Combined", "RGB", frame_dir)
         albedo = albedo + find_channels(ch, "Denoising Albedo", "RGB", frame_dir)
         normal = normal + find_channels(ch, "Denoising Normal", "XYZ", frame_dir)
-    arrays = [np.ascontiguousarray(a / 16, dtype=np.float32) for a in (color, albedo, normal)]
+    arrays = [np.ascontiguousarray(a / len(names), dtype=np.float32) for a in (color, albedo, normal)]
     arrays[0] = arrays[0].clip(min=0)
     arrays[1] = arrays[1].clip(0, 1)
     arrays[2] = arrays[2].clip(-1, 1)
@@ -89,16 +89,21 @@ def main(argv):
             fdir = os.path.join(scene_dir(dirs[n], seed), "frame_0")
             target = (read_color(os.path.join(fdir, "gt_a.exr")) + read_color(os.path.join(fdir, "gt_b.exr"))) / 2
             row["gt%d" % n] = (rel_mse(target, ref), psnr(target, ref))
+            cleansed = oidn_mean(fdir, ["gt_a.exr", "gt_b.exr"])
+            if cleansed is not None:
+                row["oidn_gt%d" % n] = (rel_mse(cleansed, ref), psnr(cleansed, ref))
         fdir = os.path.join(scene_dir(dirs[spps[0]], seed), "frame_0")
         noisy = sum(read_color(os.path.join(fdir, "spp4_%02d.exr" % i)).astype(np.float64) for i in range(16)) / 16
         row["input64"] = (rel_mse(noisy, ref), psnr(noisy, ref))
-        denoised = oidn_64(fdir)
+        denoised = oidn_mean(fdir, ["spp4_%02d.exr" % i for i in range(16)])
         if denoised is not None:
             row["oidn64"] = (rel_mse(denoised, ref), psnr(denoised, ref))
         rows.append(row)
-    keys = ["gt%d" % n for n in spps] + ["input64"] + (["oidn64"] if "oidn64" in rows[0] else [])
-    names = ["target 2x%d spp" % n for n in spps] + ["input 64 spp"] + \
-        (["OIDN on 64 spp"] if "oidn64" in rows[0] else [])
+    oidn = "oidn64" in rows[0]
+    keys = ["gt%d" % n for n in spps] + (["oidn_gt%d" % n for n in spps] if oidn else []) + ["input64"] + \
+        (["oidn64"] if oidn else [])
+    names = ["target 2x%d spp" % n for n in spps] + (["OIDN on target 2x%d" % n for n in spps] if oidn else []) + \
+        ["input 64 spp"] + (["OIDN on 64 spp"] if oidn else [])
     print("relMSE / PSNR (dB) against a %d-spp reference, 128x128, frame 0" % args.ref_spp)
     print("| seed | " + " | ".join(names) + " |")
     print("|---|" + "---|" * len(names))
