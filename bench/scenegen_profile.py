@@ -7,7 +7,8 @@ Renders the seeds with scenegen/make_dataset.py --profile (options after the kno
 ones go to it; defaults are the training set's: 128x128, 16 x 4 spp, 2 x 256-spp
 ground truth, 2 frames, 2 threads), then prints wall and CPU time, frames per hour as
 measured and as if the cores were free (CPU seconds / threads: the machine may be
-shared), and a table of the phases per frame: Blender start-up (process start to the
+shared), and a table of the phases per frame in CPU seconds (robust to a busy machine)
+and wall seconds: Blender start-up (process start to the
 script running), scene build (Python: geometry, materials, camera search), exposure
 probe (a 32x32 render: kernel load, scene sync and BVH build happen here), sampling
 of the stacks and of the ground truths, EXR writes (one multilayer file timed again
@@ -61,35 +62,48 @@ def main(argv):
     cpu = usage.ru_utime + usage.ru_stime
 
     metas = [json.load(open(m)) for m in glob.glob(os.path.join(args.out, "*", "scene_*", "frame_*", "meta.json"))]
+    metas = [m for m in metas if "render_cpu_seconds" in m and None not in m["render_cpu_seconds"].values()]
     if not metas:
         sys.exit("scenegen_profile.py: no frames were rendered")
     n = len(metas)
     scenes = {m["seed"]: m for m in metas}
-    startup = sum(float(x) for log in glob.glob(os.path.join(args.out, "logs", "batch_*.log"))
-                  for x in re.findall(r"start-up ([0-9.]+) s", open(log).read()))
-    build = sum(m["scene_build_seconds"] for m in scenes.values())
-    probe = sum(m["probe_seconds"] for m in scenes.values())
-    stacks = sum(v for m in metas for k, v in m["render_seconds"].items() if k.startswith("spp") and v)
-    gts = sum(v for m in metas for k, v in m["render_seconds"].items() if k.startswith("gt") and v)
-    writes = sum(m["exr_write_seconds"] * len(m["files"]) for m in metas)
-    phases = [("Blender start-up", startup), ("scene build (Python)", build),
-              ("exposure probe (kernel load, sync, BVH)", probe),
-              ("stacks: sampling", stacks - writes * metas[0]["stacks"] / len(metas[0]["files"])),
-              ("ground truth: sampling", gts - writes * (len(metas[0]["files"]) - metas[0]["stacks"])
-               / len(metas[0]["files"])),
-              ("EXR writes", writes)]
-    # Phase times are summed over the side-by-side processes: per frame of one process's wall.
-    wall_all = wall * args.procs
-    phases.append(("rest (driver, checks, manifest)", wall_all - sum(v for _, v in phases)))
+    logs = "".join(open(log).read() for log in glob.glob(os.path.join(args.out, "logs", "batch_*.log")))
+    starts = [(float(w), float(c)) for w, c in re.findall(r"start-up ([0-9.]+) s, ([0-9.]+) s CPU", logs)]
+    files = len(metas[0]["files"])
+    n_stacks = metas[0]["stacks"]
+
+    def total(key, kind, pick):
+        return sum(v for m in metas for name, v in m[key].items() if name.startswith(pick) and v) if kind else 0
+
+    phases = []
+    for label, wall_s, cpu_s in [
+            ("Blender start-up", sum(w for w, _ in starts), sum(c for _, c in starts)),
+            ("scene build (Python: geometry, materials, camera search)",
+             sum(m["scene_build_seconds"] for m in scenes.values()),
+             sum(m["scene_build_cpu_seconds"] for m in scenes.values())),
+            ("exposure probe (kernel load, scene sync, BVH build)",
+             sum(m["probe_seconds"] for m in scenes.values()), sum(m["probe_cpu_seconds"] for m in scenes.values())),
+            ("stacks: sampling (%d x %d spp)" % (n_stacks, metas[0]["spp"]),
+             total("render_seconds", 1, "spp") - sum(m["exr_write_seconds"] for m in metas) * n_stacks,
+             total("render_cpu_seconds", 1, "spp") - sum(m["exr_write_cpu_seconds"] for m in metas) * n_stacks),
+            ("ground truth: sampling (%d x %d spp)" % (files - n_stacks, metas[0]["gt_spp"]),
+             total("render_seconds", 1, "gt") - sum(m["exr_write_seconds"] for m in metas) * (files - n_stacks),
+             total("render_cpu_seconds", 1, "gt") - sum(m["exr_write_cpu_seconds"] for m in metas) * (files - n_stacks)),
+            ("EXR writes (%d multilayer files)" % files, sum(m["exr_write_seconds"] for m in metas) * files,
+             sum(m["exr_write_cpu_seconds"] for m in metas) * files)]:
+        phases.append((label, wall_s, cpu_s))
+    wall_all = wall * args.procs  # phase wall times are summed over the side-by-side processes
+    phases.append(("rest (driver, checks, manifest)", wall_all - sum(p[1] for p in phases),
+                   cpu - sum(p[2] for p in phases)))
     print("%d frames of %d scenes in %.0f s wall, %.0f s CPU; load average %.1f at the start, %.1f at the end"
           % (n, len(scenes), wall, cpu, load0, os.getloadavg()[0]))
     print("frames per hour: %.0f measured; %.0f with %d free cores (CPU seconds / %d)"
           % (3600 * n / wall, 3600 * n / (cpu / threads), threads, threads))
-    print("| phase | s per frame (wall) | share |")
-    print("|---|---|---|")
-    for name, seconds in phases:
-        print("| %s | %.2f | %.0f%% |" % (name, seconds / n, 100 * seconds / wall_all))
-    print("| total (one process) | %.2f | 100%% |" % (wall_all / n))
+    print("| phase | CPU s per frame | share of CPU | wall s per frame (one process) |")
+    print("|---|---|---|---|")
+    for name, wall_s, cpu_s in phases:
+        print("| %s | %.2f | %.0f%% | %.2f |" % (name, cpu_s / n, 100 * cpu_s / cpu, wall_s / n))
+    print("| total | %.2f | 100%% | %.2f |" % (cpu / n, wall_all / n))
     return 0
 
 

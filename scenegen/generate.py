@@ -1228,12 +1228,12 @@ def render_to(path, scene, samples, seed, depth):
     scene.render.image_settings.color_depth = depth
     tmp = path + ".tmp%d" % os.getpid()
     scene.render.filepath = tmp
-    t0 = time.time()
+    t0, c0 = time.time(), time.process_time()
     bpy.ops.render.render(write_still=True)
     if not os.path.exists(tmp):
         raise RuntimeError("Blender wrote no file for " + path)
     os.replace(tmp, path)
-    return time.time() - t0
+    return time.time() - t0, time.process_time() - c0
 
 
 def luminance_probe(scene, seed, probe_res=32, samples=16):
@@ -1305,7 +1305,7 @@ def render_frame(scene, args, k, frame_dir):
     for name in os.listdir(frame_dir):  # leftovers of an interrupted run
         if ".tmp" in name:
             os.remove(os.path.join(frame_dir, name))
-    times, seeds = {}, {}
+    times, cpu, seeds = {}, {}, {}
     jobs = [("spp%d_%02d.exr" % (args.spp, i), args.spp, render_seed(args, "stack", k, i), "16")
             for i in range(args.stacks)]
     jobs += [("gt_%s.exr" % tag, args.gt_spp, render_seed(args, "gt", k, tag), args.gt_depth)
@@ -1314,31 +1314,32 @@ def render_frame(scene, args, k, frame_dir):
         seeds[name] = seed
         path = os.path.join(frame_dir, name)
         if os.path.exists(path):
-            times[name] = None  # rendered by an earlier, interrupted run
+            times[name] = cpu[name] = None  # rendered by an earlier, interrupted run
             continue
-        times[name] = round(render_to(path, scene, samples, seed, depth), 3)
-    return times, seeds
+        wall, cpu_s = render_to(path, scene, samples, seed, depth)
+        times[name], cpu[name] = round(wall, 3), round(cpu_s, 3)
+    return times, cpu, seeds
 
 
 def time_exr_write(scene, frame_dir):
     """Seconds to write the last render once more as a multilayer EXR (the profile's write share)."""
     tmp = os.path.join(frame_dir, "profile.tmp%d" % os.getpid())
-    t0 = time.time()
+    t0, c0 = time.time(), time.process_time()
     bpy.data.images["Render Result"].save_render(tmp, scene=scene)
-    seconds = time.time() - t0
+    seconds, cpu = time.time() - t0, time.process_time() - c0
     os.remove(tmp)
-    return round(seconds, 4)
+    return round(seconds, 4), round(cpu, 4)
 
 
 def render_scene(args, seed, scene_dir, frames, photos):
-    t_build = time.time()
+    t_build, c_build = time.time(), time.process_time()
     cam, target, path, lighting, description, rng = build_scene(seed, photos)
     scene = bpy.context.scene
     configure_render(scene, args)
-    build_seconds = time.time() - t_build
-    t_probe = time.time()
+    build_seconds, build_cpu = time.time() - t_build, time.process_time() - c_build
+    t_probe, c_probe = time.time(), time.process_time()
     exposure = choose_exposure(scene, seed, rng, lighting, path, cam, target, args.frames)
-    probe_seconds = time.time() - t_probe
+    probe_seconds, probe_cpu = time.time() - t_probe, time.process_time() - c_probe
     description["exposure"] = exposure
     os.makedirs(scene_dir, exist_ok=True)
     write_json(os.path.join(scene_dir, "scene.json"),
@@ -1349,7 +1350,7 @@ def render_scene(args, seed, scene_dir, frames, photos):
         set_camera_frame(cam, target, path, k, args.frames)
         frame_dir = os.path.join(scene_dir, "frame_%d" % k)
         t0 = time.time()
-        times, seeds = render_frame(scene, args, k, frame_dir)
+        times, cpu, seeds = render_frame(scene, args, k, frame_dir)
         frame_seconds = time.time() - t0
         meta = {
             "generator_version": GENERATOR_VERSION, "blender_version": bpy.app.version_string,
@@ -1357,20 +1358,22 @@ def render_scene(args, seed, scene_dir, frames, photos):
             "gt_spp": args.gt_spp, "gt_count": args.gt_count, "gt_depth": args.gt_depth, "threads": args.threads,
             "seed_tag": args.seed_tag, "archetype": description["archetype"], "lighting": description["lighting"],
             "render_seeds": seeds, "render_seconds": times, "frame_seconds": round(frame_seconds, 3),
-            "scene_build_seconds": round(build_seconds, 3), "probe_seconds": round(probe_seconds, 3),
+            "render_cpu_seconds": cpu, "scene_build_seconds": round(build_seconds, 3),
+            "scene_build_cpu_seconds": round(build_cpu, 3), "probe_seconds": round(probe_seconds, 3),
+            "probe_cpu_seconds": round(probe_cpu, 3),
             "camera_matrix_world": [list(map(lambda v: round(v, 6), row)) for row in cam.matrix_world],
             "camera_lens_mm": cam.data.lens, "camera_sensor_mm": cam.data.sensor_width,
             "exposure_scale": exposure["exposure_scale"],
             "files": frame_files(args.stacks, args.spp, args.gt_count),
         }
         if args.profile:
-            meta["exr_write_seconds"] = time_exr_write(scene, frame_dir)
+            meta["exr_write_seconds"], meta["exr_write_cpu_seconds"] = time_exr_write(scene, frame_dir)
         write_json(os.path.join(frame_dir, "meta.json"), meta)
         print("SCENEGEN frame %d %d done %.2f" % (seed, k, frame_seconds), file=sys.stderr, flush=True)
 
 
 def main():
-    print("SCENEGEN ready %.3f" % time.time(), file=sys.stderr, flush=True)
+    print("SCENEGEN ready %.3f %.3f" % (time.time(), time.process_time()), file=sys.stderr, flush=True)
     args = parse_args()
     photos = [os.path.join(PHOTO_DIR, p) for p in PHOTO_NAMES]
     missing = [p for p in photos if not os.path.exists(p)]

@@ -155,7 +155,8 @@ def render_batch(args, batch, log_dir, on_frame):
             log.write(line)
             words = line.split()
             if words[:2] == ["SCENEGEN", "ready"]:
-                log.write("make_dataset.py: start-up %.2f s\n" % (float(words[2]) - started))
+                cpu = float(words[3]) if len(words) > 3 else float("nan")
+                log.write("make_dataset.py: start-up %.2f s, %.2f s CPU\n" % (float(words[2]) - started, cpu))
             elif words[:2] == ["SCENEGEN", "frame"] and len(words) >= 5:
                 log.flush()
                 on_frame(int(words[2]), int(words[3]))
