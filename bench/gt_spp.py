@@ -27,9 +27,9 @@ from exrutil import find_channels, read_channels, read_color  # noqa: E402
 from make_dataset import scene_dir  # noqa: E402
 
 
-def render(out, seeds, threads, blender, **kw):
+def render(out, seeds, res, threads, blender, **kw):
     cmd = [sys.executable, os.path.join(ROOT, "scenegen", "make_dataset.py"), "--out", out, "--seeds", seeds,
-           "--res", "128", "--frames", "1", "--threads", str(threads), "--blender", blender, "--batch", "50"]
+           "--res", str(res), "--frames", "1", "--threads", str(threads), "--blender", blender, "--batch", "50"]
     for key, value in kw.items():
         cmd += ["--" + key.replace("_", "-"), str(value)]
     subprocess.run(cmd, check=True)
@@ -70,16 +70,17 @@ def main(argv):
     p.add_argument("--gt-spps", default="128,256,512")
     p.add_argument("--ref-spp", type=int, default=4096)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--res", type=int, default=128)
     p.add_argument("--blender", default="blender")
     args = p.parse_args(argv)
     spps = [int(s) for s in args.gt_spps.split(",")]
     dirs = {spps[0]: os.path.join(args.out, "gt%d" % spps[0])}
-    render(dirs[spps[0]], args.seeds, args.threads, args.blender, gt_spp=spps[0], stacks=16)
+    render(dirs[spps[0]], args.seeds, args.res, args.threads, args.blender, gt_spp=spps[0], stacks=16)
     for n in spps[1:]:
         dirs[n] = os.path.join(args.out, "gt%d" % n)
-        render(dirs[n], args.seeds, args.threads, args.blender, gt_spp=n, stacks=1, seed_tag="gt%d" % n)
+        render(dirs[n], args.seeds, args.res, args.threads, args.blender, gt_spp=n, stacks=1, seed_tag="gt%d" % n)
     ref_dir = os.path.join(args.out, "ref")
-    render(ref_dir, args.seeds, args.threads, args.blender, gt_spp=args.ref_spp, stacks=1, gt_count=1,
+    render(ref_dir, args.seeds, args.res, args.threads, args.blender, gt_spp=args.ref_spp, stacks=1, gt_count=1,
            seed_tag="ref")
     rows = []
     for seed in (int(s) for s in args.seeds.split(",")):
@@ -104,7 +105,7 @@ def main(argv):
         (["oidn64"] if oidn else [])
     names = ["target 2x%d spp" % n for n in spps] + (["OIDN on target 2x%d" % n for n in spps] if oidn else []) + \
         ["input 64 spp"] + (["OIDN on 64 spp"] if oidn else [])
-    print("relMSE / PSNR (dB) against a %d-spp reference, 128x128, frame 0" % args.ref_spp)
+    print("relMSE / PSNR (dB) against a %d-spp reference, %dx%d, frame 0" % (args.ref_spp, args.res, args.res))
     print("| seed | " + " | ".join(names) + " |")
     print("|---|" + "---|" * len(names))
     for row in rows:

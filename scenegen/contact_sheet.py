@@ -2,6 +2,7 @@
 """A PNG grid of a data set's reference frames, one row per archetype (docs/dataset.md).
 
   python3 scenegen/contact_sheet.py DATA --out docs/dataset_contact_sheet.png --per-row 8
+  python3 scenegen/contact_sheet.py MANIFEST.json --table     # frames per archetype and lighting
 
 Each tile is the mean of a frame's ground truths (gt_a, gt_b; gt_clean when present),
 tonemapped with Reinhard on luminance and the sRGB curve, labelled with its seed and
@@ -55,13 +56,32 @@ def frames_by_archetype(root):
     return {a: [(s, f, l, d) for f, s, l, d in sorted(v)] for a, v in rows.items()}
 
 
+def print_table(manifest_path):
+    """Markdown: frames per archetype (rows) and lighting (columns), from a manifest's frame_counts."""
+    with open(manifest_path) as f:
+        counts = json.load(f)["frame_counts"]
+    lights = list(counts["lighting"])
+    print("| archetype | " + " | ".join(lights) + " | frames |")
+    print("|---|" + "---|" * (len(lights) + 1))
+    for arch, row in counts["archetype_lighting"].items():
+        print("| %s | " % arch + " | ".join(str(row.get(l, "")) for l in lights) + " | %d |" % sum(row.values()))
+    print("| frames | " + " | ".join(str(counts["lighting"][l]) for l in lights) +
+          " | %d |" % sum(counts["lighting"].values()))
+
+
 def main(argv):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("data", help="data set folder (with train/, val/, test/)")
-    p.add_argument("--out", required=True, help="PNG to write")
+    p.add_argument("data", help="data set folder (with train/, val/, test/), or a manifest with --table")
+    p.add_argument("--out", help="PNG to write")
+    p.add_argument("--table", action="store_true", help="print the archetype x lighting table of a manifest")
     p.add_argument("--per-row", type=int, default=8, help="frames per archetype")
     p.add_argument("--tile", type=int, default=128, help="tile size in pixels")
     args = p.parse_args(argv)
+    if args.table:
+        print_table(args.data)
+        return 0
+    if not args.out:
+        p.error("--out is needed for the contact sheet")
     rows = frames_by_archetype(args.data)
     if not rows:
         sys.exit("contact_sheet.py: %s: no finished frames" % args.data)
