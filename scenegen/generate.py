@@ -59,6 +59,8 @@ def parse_args():
     p.add_argument("--seed", type=int, help="one scene (with --scene-dir)")
     p.add_argument("--scene-dir")
     p.add_argument("--jobs", help="JSON file: a list of {seed, scene_dir, frames}, rendered in this one process")
+    p.add_argument("--describe", metavar="FILE",
+                   help="render nothing: build each job's scene and write [{seed, archetype, lighting}] to FILE")
     p.add_argument("--profile", action="store_true",
                    help="also time one extra EXR write per frame (meta.json: exr_write_seconds)")
     p.add_argument("--res", type=int, default=128)
@@ -1379,6 +1381,14 @@ def main():
     missing = [p for p in photos if not os.path.exists(p)]
     if missing:
         sys.exit("generate.py: photographs missing (%s); install Debian package mate-backgrounds" % missing[0])
+    if args.describe:
+        described = []
+        for seed, _, _ in job_list(args):
+            description = build_scene(seed, photos)[4]
+            described.append({"seed": seed, "archetype": description["archetype"],
+                              "lighting": description["lighting"]})
+        write_json(args.describe, described)
+        return
     for seed, scene_dir, frames in job_list(args):
         render_scene(args, seed, scene_dir, frames, photos)
 

@@ -74,6 +74,9 @@ def parse_args(argv):
     p.add_argument("--profile", action="store_true", help="also time one extra EXR write per frame")
     p.add_argument("--manifest-only", action="store_true", help="only rebuild manifest.json from disk")
     p.add_argument("--export", help="also write the small manifest (settings, counts, per-frame checks) here")
+    p.add_argument("--describe-only", metavar="FILE",
+                   help="render nothing: build every scene of the range and write the frames each archetype "
+                        "and lighting will get (the manifest's frame_counts) to FILE")
     args = p.parse_args(argv)
     try:
         args.seed_list = [int(x) for x in args.seeds.split(",") if x.strip()] if args.seeds else \
@@ -128,6 +131,31 @@ def blender_version(blender):
         return lines[0].strip() if lines else "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+def describe(args, path):
+    """Builds (does not render) every scene of the range in one Blender process; writes frame counts."""
+    os.makedirs(os.path.join(args.out, "logs"), exist_ok=True)
+    jobs_path = os.path.join(args.out, "logs", "describe_jobs.json")
+    write_json_atomic(jobs_path, [{"seed": s, "scene_dir": scene_dir(args.out, s), "frames": []}
+                                  for s in args.seed_list])
+    out_path = os.path.join(args.out, "logs", "describe.json")
+    log_path = os.path.join(args.out, "logs", "describe.log")
+    with open(log_path, "w") as log:
+        rc = subprocess.call(generator_command(args, jobs_path) + ["--describe", out_path], stdout=log,
+                             stderr=subprocess.STDOUT)
+    if rc != 0:
+        sys.exit("make_dataset.py: Blender failed describing the scenes (exit %d); see %s" % (rc, log_path))
+    scenes = [{"seed": d["seed"], "frames": [{"archetype": d["archetype"], "lighting": d["lighting"]}] * args.frames}
+              for d in json.load(open(out_path))]
+    data = {"what": "frames per archetype and lighting that make_dataset.py will render (scenes built, "
+                    "not rendered)", "settings": render_settings(args),
+            "seeds": {"first": args.first_seed, "count": args.scenes} if not args.seeds else args.seed_list,
+            "scene_count": len(scenes), "frame_count": len(scenes) * args.frames,
+            "frame_counts": count_frames(scenes)}
+    write_json_atomic(path, data)
+    os.remove(jobs_path)
+    return data
 
 
 def generator_command(args, jobs_path):
@@ -301,6 +329,11 @@ def main(argv):
         return 0
     if bversion == "unknown":
         sys.exit("make_dataset.py: cannot run '%s' (Blender, or a Python with bpy)" % args.blender)
+    if args.describe_only:
+        d = describe(args, args.describe_only)
+        print("make_dataset.py: %d scenes, %d frames described in %s" % (d["scene_count"], d["frame_count"],
+                                                                        args.describe_only), file=sys.stderr)
+        return 0
     log_dir = os.path.join(args.out, "logs")
     os.makedirs(log_dir, exist_ok=True)
     seeds, work = plan_work(args)
