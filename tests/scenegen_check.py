@@ -154,6 +154,12 @@ def test_tiny_render(work, blender):
                                     "--frames", "1", "--gt-count", "1", "--blender", blender],
                          capture_output=True, text=True)
     check(run.returncode == 0 and "0 frames to render, 1 already done" in run.stderr, "a second run renders nothing")
+    plan = os.path.join(work, "plan.json")
+    run = subprocess.run(cmd[:2] + ["--out", os.path.join(work, "plan"), "--seeds", "3,9", "--frames", "2",
+                                    "--blender", blender, "--describe-only", plan], capture_output=True, text=True)
+    counts = json.load(open(plan))["frame_counts"]["archetype"] if run.returncode == 0 else {}
+    check(counts == {"exterior": 2, "metal_hdri": 2}, "--describe-only: seeds 3 and 9 are an exterior and "
+          "metals under an HDRI, 2 frames each (%s)" % counts)
 
 
 def main():
