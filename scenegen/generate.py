@@ -1,15 +1,17 @@
-"""Random-scene generator for denoiser training data (Blender 3.4 Cycles).
+"""Random-scene generator for denoiser training data (Blender 3.4 .. 5.x Cycles).
 
-Run inside Blender:
+Run inside Blender, or under a Python with the bpy module (PyPI bpy 5):
   blender -b --factory-startup --python scenegen/generate.py -- \
       --seed 7 --scene-dir OUT/train/scene_000007 --res 128 --spp 4 --stacks 16 \
-      --gt-spp 1024 --frames 8 --threads 2
+      --gt-spp 256 --frames 2 --threads 1
+  /work/venv-bpy/bin/python scenegen/generate.py --jobs JOBS.json --res 128 ...
 
-Builds one scene deterministically from --seed, then renders every requested
-frame of its camera move: --stacks independent low-spp renders and two
-independent ground-truth renders, each a multilayer EXR with all feature
-passes. All renders of all frames happen in this one process (Cycles keeps the
-scene with persistent data), so the per-process startup cost is paid once.
+Builds each scene deterministically from its seed (one --seed, or every entry of
+--jobs: [{seed, scene_dir, frames}]), then renders the requested frames of its
+camera move: --stacks independent low-spp renders and two independent
+ground-truth renders, each a multilayer EXR with all feature passes. All scenes
+of a job list render in this one process (Cycles keeps a scene with persistent
+data across its renders), so Blender's start-up is paid once per batch.
 Every file is written under a temporary name and renamed when complete; a frame
 is complete when its meta.json exists (written last). See docs/dataset.md.
 """
@@ -1143,7 +1145,7 @@ def build_scene(seed, photos):
         lamp_kinds["sun"] = 0
     elif archetype == "exterior":
         world_style = "sky" if rng.random() < 0.7 else "hdri"
-        floor = plain_floor(rng, mats, 80.0, ("diffuse",))
+        plain_floor(rng, mats, 80.0, ("diffuse",))
         extent = rng.uniform(2.0, 3.5)
         for i in range(rng.randint(2, 5)):
             az, r = rng.uniform(0, 2 * math.pi), rng.uniform(extent + 2.0, extent + 9.0)
@@ -1151,7 +1153,6 @@ def build_scene(seed, photos):
         n_lights = 0
         build.update(geometry=[(foliage, 6), (railing, 3), (wires, 2), (primitive, 3), (bevelled_box, 3),
                                (displaced_blob, 2)], count=(3, 8))
-        del floor
     elif archetype == "night":
         world_style = "night"
         plain_floor(rng, mats, 60.0, ("plastic", "coated"))  # wet, glossy ground
