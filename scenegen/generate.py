@@ -29,7 +29,7 @@ import bpy  # first: with the bpy module (Blender 5 from PyPI) bmesh and mathuti
 import bmesh  # noqa: I100
 from mathutils import Euler, Matrix, Vector
 
-GENERATOR_VERSION = "2.0.0"
+GENERATOR_VERSION = "2.1.0"
 
 WORLD_HDRI_DIR = "/usr/share/blender/datafiles/studiolights/world"
 HDRI_NAMES = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
@@ -436,12 +436,15 @@ class MaterialFactory:
             nt.links.new(vec, noise.inputs["Vector"])
             color_out, label = self._ramp(nt, noise.outputs["Fac"], greens), "green"
         nt.links.new(color_out, bsdf.inputs["Base Color"])
-        cut = nt.nodes.new("ShaderNodeTexVoronoi" if rng.random() < 0.5 else "ShaderNodeTexNoise")
+        # Leaves: discs (or diamonds) around Voronoi points, 8-33 cm apart in the card's own
+        # space, covering 13-50% of it, so a bush is seen through.
+        cut = nt.nodes.new("ShaderNodeTexVoronoi")
+        cut.distance = "EUCLIDEAN" if rng.random() < 0.5 else "MANHATTAN"
         cut.inputs["Scale"].default_value = rng.uniform(3, 12)
-        nt.links.new(vec, cut.inputs["Vector"])
-        alpha = self._map_range(nt, cut.outputs["Distance" if "Distance" in cut.outputs else "Fac"], 0.0, 1.0)
+        nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Object"], cut.inputs["Vector"])
+        alpha = self._map_range(nt, cut.outputs["Distance"], 0.0, 1.0)
         alpha.node.clamp = True
-        edge = rng.uniform(0.35, 0.55)
+        edge = rng.uniform(0.35, 0.55) - 0.15
         alpha.node.inputs["From Min"].default_value = edge + 0.02
         alpha.node.inputs["From Max"].default_value = edge  # inverted: near the cell centre is leaf
         nt.links.new(alpha, bsdf.inputs["Alpha"])
