@@ -1,15 +1,17 @@
-"""Random-scene generator for denoiser training data (Blender 3.4 Cycles).
+"""Random-scene generator for denoiser training data (Blender 3.4 .. 5.x Cycles).
 
-Run inside Blender:
+Run inside Blender, or under a Python with the bpy module (PyPI bpy 5):
   blender -b --factory-startup --python scenegen/generate.py -- \
       --seed 7 --scene-dir OUT/train/scene_000007 --res 128 --spp 4 --stacks 16 \
-      --gt-spp 1024 --frames 8 --threads 2
+      --gt-spp 256 --frames 2 --threads 1
+  /work/venv-bpy/bin/python scenegen/generate.py --jobs JOBS.json --res 128 ...
 
-Builds one scene deterministically from --seed, then renders every requested
-frame of its camera move: --stacks independent low-spp renders and two
-independent ground-truth renders, each a multilayer EXR with all feature
-passes. All renders of all frames happen in this one process (Cycles keeps the
-scene with persistent data), so the per-process startup cost is paid once.
+Builds each scene deterministically from its seed (one --seed, or every entry of
+--jobs: [{seed, scene_dir, frames}]), then renders the requested frames of its
+camera move: --stacks independent low-spp renders and two independent
+ground-truth renders, each a multilayer EXR with all feature passes. All scenes
+of a job list render in this one process (Cycles keeps a scene with persistent
+data across its renders), so Blender's start-up is paid once per batch.
 Every file is written under a temporary name and renamed when complete; a frame
 is complete when its meta.json exists (written last). See docs/dataset.md.
 """
@@ -23,11 +25,11 @@ import random
 import sys
 import time
 
-import bmesh
-import bpy
+import bpy  # first: with the bpy module (Blender 5 from PyPI) bmesh and mathutils come with it
+import bmesh  # noqa: I100
 from mathutils import Euler, Matrix, Vector
 
-GENERATOR_VERSION = "1.0.0"
+GENERATOR_VERSION = "2.1.0"
 
 WORLD_HDRI_DIR = "/usr/share/blender/datafiles/studiolights/world"
 HDRI_NAMES = ["city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"]
@@ -46,11 +48,23 @@ MAX_EMITTER_RADIANCE = 30000.0
 AOV_NAMES = ("roughness", "metallic", "transmission")
 
 
+def script_argv():
+    """Arguments after '--' under Blender; all of them when run by a Python with the bpy module."""
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:] if os.path.basename(sys.argv[0]) == "generate.py" else []
+
+
 def parse_args():
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    argv = script_argv()
     p = argparse.ArgumentParser(prog="generate.py")
-    p.add_argument("--seed", type=int, required=True)
-    p.add_argument("--scene-dir", required=True)
+    p.add_argument("--seed", type=int, help="one scene (with --scene-dir)")
+    p.add_argument("--scene-dir")
+    p.add_argument("--jobs", help="JSON file: a list of {seed, scene_dir, frames}, rendered in this one process")
+    p.add_argument("--describe", metavar="FILE",
+                   help="render nothing: build each job's scene and write [{seed, archetype, lighting}] to FILE")
+    p.add_argument("--profile", action="store_true",
+                   help="also time one extra EXR write per frame (meta.json: exr_write_seconds)")
     p.add_argument("--res", type=int, default=128)
     p.add_argument("--spp", type=int, default=4)
     p.add_argument("--stacks", type=int, default=16)
@@ -66,13 +80,60 @@ def parse_args():
     p.add_argument("--seed-tag", default="",
                    help="mixed into every Cycles render seed (not the scene or exposure): a reference "
                         "rendered with a tag has noise independent of the data set's renders")
-    return p.parse_args(argv)
+    args = p.parse_args(argv)
+    if args.jobs is None and (args.seed is None or args.scene_dir is None):
+        p.error("give --seed and --scene-dir, or --jobs")
+    return args
+
+
+def job_list(args):
+    """[(seed, scene folder, frame indices)] from --jobs or --seed/--scene-dir/--only-frames."""
+    if args.jobs is None:
+        frames = [int(x) for x in args.only_frames.split(",") if x != ""] or list(range(args.frames))
+        return [(args.seed, args.scene_dir, frames)]
+    with open(args.jobs) as f:
+        return [(int(j["seed"]), j["scene_dir"], [int(k) for k in j["frames"]]) for j in json.load(f)]
 
 
 def derived_seed(*parts):
     """Stable 31-bit seed from any labelled tuple (independent of Python's hash salt)."""
     digest = hashlib.sha256(":".join(str(x) for x in parts).encode()).hexdigest()
     return int(digest[:8], 16) & 0x7FFFFFFF
+
+
+# --------------------------------------------------------------------------- Blender 3.4 .. 5.x
+
+def inp(node, *names):
+    """The first of names that node has as an input (Principled inputs were renamed in 4.0)."""
+    for name in names:
+        if name in node.inputs:
+            return node.inputs[name]
+    raise KeyError("%s has none of the inputs %s" % (node.bl_idname, ", ".join(names)))
+
+
+def set_enum(owner, prop, *values):
+    """Sets the first of values that this Blender accepts for an enum property."""
+    allowed = {item.identifier for item in owner.bl_rna.properties[prop].enum_items}
+    for value in values:
+        if value in allowed:
+            setattr(owner, prop, value)
+            return
+    raise KeyError("%s.%s accepts none of %s" % (owner.bl_rna.identifier, prop, ", ".join(values)))
+
+
+def set_file_format(image_settings, file_format):
+    """Blender 5 picks the media type (single or multilayer image) before the format."""
+    if hasattr(image_settings, "media_type"):
+        image_settings.media_type = "MULTI_LAYER_IMAGE" if file_format == "OPEN_EXR_MULTILAYER" else "IMAGE"
+    image_settings.file_format = file_format
+
+
+def set_any(owner, props, value):
+    """Sets the first of props that owner has; the value is drawn either way (same scene on every Blender)."""
+    for prop in props:
+        if hasattr(owner, prop):
+            setattr(owner, prop, value)
+            return
 
 
 # --------------------------------------------------------------------------- render setup
@@ -100,7 +161,7 @@ def configure_render(scene, args):
     scene.render.film_transparent = False
     scene.render.use_motion_blur = False
     scene.render.use_file_extension = False
-    scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    set_file_format(scene.render.image_settings, "OPEN_EXR_MULTILAYER")
     scene.render.image_settings.exr_codec = args.codec
     scene.render.image_settings.color_depth = "16"
 
@@ -132,6 +193,7 @@ class MaterialFactory:
         self.count = 0
         self.max_emission = 0.0  # brightest emissive surface radiance, for the half-float bound
         self.log = []
+        self.photo_all = False  # the "photo" archetype: every surface gets a photograph
 
     def random_color(self, sat=(0.0, 0.9), val=(0.05, 0.9)):
         import colorsys
@@ -203,8 +265,13 @@ class MaterialFactory:
             t.inputs["Scale"].default_value = self.rng.uniform(1, 6)
             fac = t.outputs["Fac"]
         else:
-            t = nt.nodes.new("ShaderNodeTexMusgrave")
-            t.musgrave_type = self.rng.choice(["FBM", "RIDGED_MULTIFRACTAL", "HETERO_TERRAIN"])
+            fractal = self.rng.choice(["FBM", "RIDGED_MULTIFRACTAL", "HETERO_TERRAIN"])
+            if hasattr(bpy.types, "ShaderNodeTexMusgrave"):
+                t = nt.nodes.new("ShaderNodeTexMusgrave")
+                t.musgrave_type = fractal
+            else:  # Blender 4.1+ merged Musgrave into Noise
+                t = nt.nodes.new("ShaderNodeTexNoise")
+                t.noise_type = fractal
             t.inputs["Scale"].default_value = self.rng.uniform(1, 10)
             fac = t.outputs["Fac"]
         nt.links.new(vec, t.inputs["Vector"])
@@ -243,11 +310,16 @@ class MaterialFactory:
     def _write_aovs(self, nt, sockets):
         for name in AOV_NAMES:
             node = nt.nodes.new("ShaderNodeOutputAOV")
-            node.name = name  # on this node type 'name' is the AOV it writes to
+            if hasattr(node, "aov_name"):  # Blender 4+
+                node.aov_name = name
+            else:  # Blender 3.x: on this node type 'name' is the AOV it writes to
+                node.name = name
             nt.links.new(sockets[name], node.inputs["Value"])
 
-    def make(self, kind=None, scale=None):
-        """Principled-BSDF material of a random kind; AOV outputs carry its parameters."""
+    def make(self, kind=None, scale=None, rough=None):
+        """Principled-BSDF material of a random kind; AOV outputs carry its parameters.
+
+        rough=(lo, hi) overrides the kind's roughness range (polished metals)."""
         rng = self.rng
         kind = kind or rng.choices(
             ["diffuse", "plastic", "metal", "glass", "rough_glass", "emissive", "subsurface",
@@ -266,6 +338,8 @@ class MaterialFactory:
         src = rng.choices(["const", "proc", "photo"], weights=[3, 4, 3])[0]
         if kind in ("glass", "rough_glass") and src == "photo":
             src = "const"
+        if self.photo_all:
+            src = "photo"
         if src == "const":
             color_out, scalar_out = None, None
             bsdf.inputs["Base Color"].default_value = self.random_color()
@@ -280,9 +354,9 @@ class MaterialFactory:
             info["color"] = "photo:" + label
 
         # Roughness: constant, or driven by the colour texture or an independent texture.
-        r_lo, r_hi = {"diffuse": (0.5, 1.0), "plastic": (0.05, 0.5), "metal": (0.0, 0.45),
-                      "glass": (0.0, 0.05), "rough_glass": (0.1, 0.4), "emissive": (0.3, 0.8),
-                      "subsurface": (0.2, 0.7), "coated": (0.2, 0.8), "rusty": (0.2, 0.9)}[kind]
+        r_lo, r_hi = rough or {"diffuse": (0.5, 1.0), "plastic": (0.05, 0.5), "metal": (0.0, 0.45),
+                               "glass": (0.0, 0.05), "rough_glass": (0.1, 0.4), "emissive": (0.3, 0.8),
+                               "subsurface": (0.2, 0.7), "coated": (0.2, 0.8), "rusty": (0.2, 0.9)}[kind]
         mode = rng.choice(["const", "const", "texture"])
         if mode == "texture" and kind not in ("glass",):
             driver = scalar_out if (scalar_out is not None and rng.random() < 0.5) else \
@@ -315,27 +389,70 @@ class MaterialFactory:
             tint = self.random_color((0.0, 0.35), (0.85, 1.0))
             bsdf.inputs["Base Color"].default_value = tint
         elif kind == "subsurface":
-            bsdf.inputs["Subsurface"].default_value = rng.uniform(0.3, 1.0)
+            inp(bsdf, "Subsurface Weight", "Subsurface").default_value = rng.uniform(0.3, 1.0)
             bsdf.inputs["Subsurface Radius"].default_value = (rng.uniform(0.2, 1.0), rng.uniform(0.1, 0.6),
                                                               rng.uniform(0.05, 0.3))
             bsdf.subsurface_method = "RANDOM_WALK"
-            if src == "const":
+            if src == "const" and "Subsurface Color" in bsdf.inputs:  # gone in Blender 4
                 bsdf.inputs["Subsurface Color"].default_value = bsdf.inputs["Base Color"].default_value
         elif kind == "coated":
-            bsdf.inputs["Clearcoat"].default_value = rng.uniform(0.5, 1.0)
-            bsdf.inputs["Clearcoat Roughness"].default_value = rng.uniform(0.0, 0.1)
-            bsdf.inputs["Sheen"].default_value = rng.uniform(0.0, 0.5)
+            inp(bsdf, "Coat Weight", "Clearcoat").default_value = rng.uniform(0.5, 1.0)
+            inp(bsdf, "Coat Roughness", "Clearcoat Roughness").default_value = rng.uniform(0.0, 0.1)
+            inp(bsdf, "Sheen Weight", "Sheen").default_value = rng.uniform(0.0, 0.5)
         elif kind == "emissive":
             strength = rng.uniform(2.0, 40.0)
             color = self.random_color((0.0, 0.7), (0.8, 1.0))
-            bsdf.inputs["Emission"].default_value = color
+            inp(bsdf, "Emission Color", "Emission").default_value = color
+            if src == "photo":  # a lit screen or poster
+                nt.links.new(color_out, inp(bsdf, "Emission Color", "Emission"))
+                color = (1.0, 1.0, 1.0)
             bsdf.inputs["Emission Strength"].default_value = strength
             self.max_emission = max(self.max_emission, strength * max(color[:3]))
             info["emission"] = round(strength, 2)
         nt.links.new(metallic, bsdf.inputs["Metallic"])
-        nt.links.new(transmission, bsdf.inputs["Transmission"])
+        nt.links.new(transmission, inp(bsdf, "Transmission Weight", "Transmission"))
         self._write_aovs(nt, {"roughness": rough, "metallic": metallic, "transmission": transmission})
         self.log.append(info)
+        return mat
+
+    def foliage(self):
+        """Leaf cards: a photograph or a green ramp, cut out by a thresholded noise or Voronoi alpha."""
+        rng = self.rng
+        self.count += 1
+        mat = bpy.data.materials.new("mat_%03d_foliage" % self.count)
+        mat.use_nodes = True
+        mat.blend_method = "CLIP"  # EEVEE only; Cycles always uses the alpha
+        nt = mat.node_tree
+        bsdf = nt.nodes["Principled BSDF"]
+        vec = self._coords(nt, rng.uniform(2.0, 8.0))
+        if self.photo_all or rng.random() < 0.5:
+            color_out, _, label = self._photo(nt, rng.uniform(0.5, 2.0))
+            label = "photo:" + label
+        else:
+            greens = [self.random_color((0.5, 0.9), (0.05, 0.5)) for _ in range(2)]
+            greens = [(c[0] * 0.5, c[1], c[2] * 0.4, 1.0) for c in greens]
+            noise = nt.nodes.new("ShaderNodeTexNoise")
+            noise.inputs["Scale"].default_value = rng.uniform(4, 20)
+            nt.links.new(vec, noise.inputs["Vector"])
+            color_out, label = self._ramp(nt, noise.outputs["Fac"], greens), "green"
+        nt.links.new(color_out, bsdf.inputs["Base Color"])
+        # Leaves: discs (or diamonds) around Voronoi points, 8-33 cm apart in the card's own
+        # space, covering 13-50% of it, so a bush is seen through.
+        cut = nt.nodes.new("ShaderNodeTexVoronoi")
+        cut.distance = "EUCLIDEAN" if rng.random() < 0.5 else "MANHATTAN"
+        cut.inputs["Scale"].default_value = rng.uniform(3, 12)
+        nt.links.new(nt.nodes.new("ShaderNodeTexCoord").outputs["Object"], cut.inputs["Vector"])
+        alpha = self._map_range(nt, cut.outputs["Distance"], 0.0, 1.0)
+        alpha.node.clamp = True
+        edge = rng.uniform(0.35, 0.55) - 0.15
+        alpha.node.inputs["From Min"].default_value = edge + 0.02
+        alpha.node.inputs["From Max"].default_value = edge  # inverted: near the cell centre is leaf
+        nt.links.new(alpha, bsdf.inputs["Alpha"])
+        rough = self._value(nt, rng.uniform(0.4, 0.9))
+        nt.links.new(rough, bsdf.inputs["Roughness"])
+        self._write_aovs(nt, {"roughness": rough, "metallic": self._value(nt, 0.0),
+                              "transmission": self._value(nt, 0.0)})
+        self.log.append({"kind": "foliage", "color": label})
         return mat
 
 
@@ -530,8 +647,37 @@ def wire_cage(rng, name):
     return obj, label
 
 
+def foliage(rng, name):
+    """A bush or branch of alpha-cut leaf cards around a point: thin, semi-transparent edges."""
+    bm = bmesh.new()
+    radius = rng.uniform(0.2, 0.7)
+    for _ in range(rng.randint(6, 24)):
+        size = rng.uniform(0.15, 0.5)
+        rot = Euler((rng.uniform(0, math.pi), rng.uniform(0, math.pi), rng.uniform(0, 2 * math.pi))).to_matrix()
+        centre = Vector((rng.gauss(0, radius), rng.gauss(0, radius), abs(rng.gauss(0, radius)) + size / 2))
+        bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=size / 2,
+                              matrix=Matrix.Translation(centre) @ rot.to_4x4())
+    return mesh_from_bmesh(name, bm), "foliage"
+
+
+def glass_pane(rng, name):
+    """A thin upright slab: emitters behind it are seen refracted and doubled."""
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.scale = (rng.uniform(0.6, 1.6), rng.uniform(0.01, 0.04), rng.uniform(0.5, 1.2))
+    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
+    return obj, "glass_pane"
+
+
 GEOMETRY = [(primitive, 30), (displaced_blob, 10), (bevelled_box, 10), (subdivided_shape, 8),
-            (lathe, 10), (text_object, 7), (railing, 7), (wires, 5), (wire_cage, 6)]
+            (lathe, 10), (text_object, 7), (railing, 7), (wires, 5), (wire_cage, 6), (foliage, 4)]
+# Mostly thin geometry: wires, railings, fences and cages, leaf cards.
+THIN_GEOMETRY = [(railing, 10), (wires, 8), (wire_cage, 8), (foliage, 10), (primitive, 4)]
+# Solid shapes that show reflections well.
+SOLID_GEOMETRY = [(primitive, 30), (displaced_blob, 10), (bevelled_box, 10), (subdivided_shape, 8),
+                  (lathe, 12), (text_object, 4)]
+GLASS_GEOMETRY = [(lathe, 10), (primitive, 6), (glass_pane, 6)]
 
 
 def evaluated_bounds(obj):
@@ -610,7 +756,7 @@ class Lighting:
         self.max_radiance = max(self.max_radiance, strength / solid_angle)
 
 
-def make_world(rng, lighting, style):
+def make_world(rng, lighting, style, hdris=HDRI_NAMES):
     world = bpy.data.worlds.new("world")
     bpy.context.scene.world = world
     world.use_nodes = True
@@ -618,7 +764,7 @@ def make_world(rng, lighting, style):
     bg = nt.nodes["Background"]
     info = {"style": style}
     if style == "hdri":
-        name = rng.choice(HDRI_NAMES)
+        name = rng.choice(hdris)
         env = nt.nodes.new("ShaderNodeTexEnvironment")
         env.image = bpy.data.images.load(os.path.join(WORLD_HDRI_DIR, name + ".exr"), check_existing=True)
         tc = nt.nodes.new("ShaderNodeTexCoord")
@@ -633,14 +779,14 @@ def make_world(rng, lighting, style):
         info.update(hdri=name, strength=round(strength, 3))
     elif style == "sky":
         sky = nt.nodes.new("ShaderNodeTexSky")
-        sky.sky_type = "NISHITA"
+        set_enum(sky, "sky_type", "NISHITA", "SINGLE_SCATTERING")  # renamed in Blender 5
         sky.sun_disc = False  # the sun is a separate sun lamp; the disc would overflow half floats
         elevation = math.radians(rng.uniform(3, 70))
         azimuth = rng.uniform(0, 2 * math.pi)
         sky.sun_elevation = elevation
         sky.sun_rotation = azimuth
-        sky.air_density = rng.uniform(0.5, 3.0)
-        sky.dust_density = rng.uniform(0.0, 4.0)
+        set_any(sky, ("air_density",), rng.uniform(0.5, 3.0))
+        set_any(sky, ("dust_density", "aerosol_density"), rng.uniform(0.0, 4.0))
         nt.links.new(sky.outputs["Color"], bg.inputs["Color"])
         strength = rng.uniform(0.05, 0.25)
         bg.inputs["Strength"].default_value = strength
@@ -650,6 +796,11 @@ def make_world(rng, lighting, style):
         color = lighting.random_color((0.0, 0.5), (0.1, 1.0))
         bg.inputs["Color"].default_value = color
         strength = rng.uniform(0.1, 1.0)
+        bg.inputs["Strength"].default_value = strength
+        info.update(strength=round(strength, 3))
+    elif style == "night":  # a faint blue sky glow; lamps do the rest
+        bg.inputs["Color"].default_value = (0.02, 0.03, 0.08, 1.0)
+        strength = rng.uniform(0.02, 0.3)
         bg.inputs["Strength"].default_value = strength
         info.update(strength=round(strength, 3))
     else:  # dark: lights only
@@ -712,7 +863,7 @@ def build_floor(rng, mats, archetype):
     return floor
 
 
-def build_room(rng, mats, lighting):
+def build_room(rng, mats, lighting, sun=True, lamp=True):
     """Closed box with one window: mostly indirect light, dark corners."""
     w, d, h = rng.uniform(4, 7), rng.uniform(4, 7), rng.uniform(2.5, 3.5)
     wall_mat = mats.make("diffuse", scale=rng.uniform(0.3, 1.0))
@@ -736,18 +887,24 @@ def build_room(rng, mats, lighting):
     room = mesh_from_bmesh("room", bm)
     room.data.materials.append(wall_mat)
     # Sun through the window lands as a sharp patch on the floor.
-    lighting.sun(math.radians(rng.uniform(15, 45)), math.pi + rng.uniform(-0.6, 0.6))
-    if rng.random() < 0.6:
+    elevation, azimuth = math.radians(rng.uniform(15, 45)), math.pi + rng.uniform(-0.6, 0.6)
+    if sun:
+        lighting.sun(elevation, azimuth)
+    if lamp and rng.random() < 0.6:
         lighting.point((rng.uniform(-1, 1), rng.uniform(-1, 1), h - 0.3), small=rng.random() < 0.5)
     return (w, d, h)
 
 
-def build_objects(rng, mats, archetype, extent, floor_z=0.0):
+def build_objects(rng, mats, archetype, extent, floor_z=0.0, geometry=GEOMETRY, material=None, count=(3, 9),
+                  first_index=0):
+    """count objects from the geometry table, placed on the floor apart from each other.
+
+    material(label) makes an object's material (default: a random one; leaf cards get foliage)."""
     objs = []
-    n = rng.randint(3, 9)
+    n = rng.randint(*count)
     placed = []
-    for i in range(n):
-        maker = rng.choices([g for g, _ in GEOMETRY], weights=[w for _, w in GEOMETRY])[0]
+    for i in range(first_index, first_index + n):
+        maker = rng.choices([g for g, _ in geometry], weights=[w for _, w in geometry])[0]
         obj, label = maker(rng, "obj_%02d" % i)
         s = rng.uniform(0.4, 1.3)
         obj.scale = (obj.scale[0] * s, obj.scale[1] * s, obj.scale[2] * s)
@@ -761,9 +918,14 @@ def build_objects(rng, mats, archetype, extent, floor_z=0.0):
                 break
         placed.append((x, y, s))
         place_on(obj, x, y, floor_z)
-        if label in ("wires",) and rng.random() < 0.5:
+        if label in ("wires", "foliage") and rng.random() < 0.5:
             obj.location.z += rng.uniform(0.0, 0.8)
-        mat = mats.make()
+        if material is not None:
+            mat = material(label)
+        elif label == "foliage":
+            mat = mats.foliage()
+        else:
+            mat = mats.make()
         if obj.type == "MESH" or obj.type in ("CURVE", "FONT"):
             obj.data.materials.append(mat)
         objs.append({"name": obj.name, "geometry": label, "material": mat.name})
@@ -824,7 +986,7 @@ def view_is_blocked(p, target, lens):
 def path_is_clear(start, end, tgt0, tgt1, obstacles, archetype, lens):
     for i in range(9):
         p = start.lerp(end, i / 8)
-        if p.z < 0.1 or (archetype == "studio" and p.y > 3.5):  # under the floor, behind the backdrop
+        if p.z < 0.1 or ("backdrop" in bpy.data.objects and p.y > 3.5):  # under the floor, behind the backdrop
             return False
         if any(all(lo[j] <= p[j] <= hi[j] for j in range(3)) for lo, hi in obstacles):
             return False
@@ -876,31 +1038,16 @@ def set_camera_frame(cam, target, path, k, frames):
     bpy.context.view_layer.update()
 
 
-def build_scene(seed, photos):
-    rng = random.Random(derived_seed("scene", seed))
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    mats = MaterialFactory(rng, photos)
-    lighting = Lighting(rng)
-    archetype = rng.choices(["open", "studio", "interior", "tabletop"], weights=[35, 25, 20, 20])[0]
-    extent = rng.uniform(1.0, 2.2) if archetype != "tabletop" else rng.uniform(0.6, 1.0)
-    room = None
-    if archetype == "interior":
-        room = build_room(rng, mats, lighting)
-        bpy.ops.mesh.primitive_plane_add(size=12.0)
-        floor = bpy.context.active_object
-        floor.name = "floor"
-        floor.data.materials.append(mats.make(rng.choice(["diffuse", "plastic", "coated"])))
-        world_style = rng.choice(["sky", "hdri", "color"])
-        extent = min(extent, min(room[0], room[1]) / 2 - 0.6)
-    else:
-        build_floor(rng, mats, archetype)
-        world_style = rng.choices(["hdri", "sky", "color", "dark"], weights=[40, 20, 15, 25])[0]
-    world_info = make_world(rng, lighting, world_style)
-    objects = build_objects(rng, mats, archetype, extent)
+# Layout archetypes and their share of scenes (docs/dataset.md, "What varies").
+ARCHETYPES = [("open", 8), ("studio", 7), ("tabletop", 7), ("interior", 7), ("window_room", 10),
+              ("glass_emitters", 10), ("exterior", 10), ("metal_hdri", 10), ("night", 10), ("photo", 10),
+              ("thin", 11)]
+OUTDOOR_HDRIS = ["city", "courtyard", "forest", "sunrise", "sunset"]
 
-    # Local lights; dark worlds always get at least one, and small ones make fireflies.
-    n_lights = rng.randint(1 if world_style == "dark" else 0, 4)
-    for _ in range(n_lights):
+
+def add_local_lights(rng, mats, lighting, room, count, kinds):
+    """count lights of kinds {kind: weight} around the set; small ones make fireflies."""
+    for _ in range(count):
         az = rng.uniform(0, 2 * math.pi)
         r = rng.uniform(1.5, 4.5)
         loc = (r * math.cos(az), r * math.sin(az), rng.uniform(0.5, 4.0))
@@ -908,8 +1055,7 @@ def build_scene(seed, photos):
             loc = (min(max(loc[0], -room[0] / 2 + 0.3), room[0] / 2 - 0.3),
                    min(max(loc[1], -room[1] / 2 + 0.3), room[1] / 2 - 0.3), min(loc[2], room[2] - 0.2))
         tgt = (rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), 0.3)
-        kind = rng.choices(["area", "spot", "point", "point_small", "sun", "emissive"],
-                           weights=[30, 20, 15, 15, 10 if room is None else 0, 10])[0]
+        kind = rng.choices(list(kinds), weights=list(kinds.values()))[0]
         if kind == "area":
             lighting.area(loc, tgt)
         elif kind == "spot":
@@ -919,23 +1065,164 @@ def build_scene(seed, photos):
         elif kind == "sun":
             lighting.sun(math.radians(rng.uniform(10, 70)), az)
         else:
-            bpy.ops.mesh.primitive_uv_sphere_add(radius=rng.uniform(0.03, 0.2), location=loc)
-            lamp = bpy.context.active_object
-            lamp.name = "emitter_%d" % len(lighting.log)
-            set_smooth(lamp)
-            lamp.data.materials.append(mats.make("emissive"))
-            lighting.log.append({"type": "EMISSIVE_OBJECT", "location": [round(c, 3) for c in loc]})
+            emissive_sphere(mats, lighting, loc, rng.uniform(0.03, 0.2))
+
+
+def emissive_sphere(mats, lighting, loc, radius):
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=loc)
+    lamp = bpy.context.active_object
+    lamp.name = "emitter_%d" % len(lighting.log)
+    set_smooth(lamp)
+    lamp.data.materials.append(mats.make("emissive"))
+    lighting.log.append({"type": "EMISSIVE_OBJECT", "location": [round(c, 3) for c in loc]})
+
+
+def plain_floor(rng, mats, size, kinds=("diffuse", "plastic", "coated")):
+    bpy.ops.mesh.primitive_plane_add(size=size)
+    floor = bpy.context.active_object
+    floor.name = "floor"
+    floor.data.materials.append(mats.make(rng.choice(kinds), scale=rng.uniform(0.2, 1.0)))
+    return floor
+
+
+def house(rng, mats, name, x, y):
+    """A box with a pyramid roof: walls for sun shadows and sky occlusion."""
+    w, d, h = rng.uniform(1.5, 3.5), rng.uniform(1.5, 3.5), rng.uniform(1.5, 4.0)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(x, y, h / 2))
+    walls = bpy.context.active_object
+    walls.name = name
+    walls.scale = (w, d, h)
+    walls.rotation_euler.z = rng.uniform(0, math.pi)
+    walls.data.materials.append(mats.make(rng.choice(["diffuse", "diffuse", "coated"]), scale=rng.uniform(0.3, 1.0)))
+    bpy.ops.mesh.primitive_cone_add(vertices=4, radius1=0.75 * max(w, d), depth=rng.uniform(0.6, 1.5),
+                                    location=(x, y, h + 0.5))
+    roof = bpy.context.active_object
+    roof.name = name + "_roof"
+    roof.rotation_euler.z = walls.rotation_euler.z + math.pi / 4
+    roof.data.materials.append(mats.make("diffuse"))
+
+
+def street_lamp(rng, mats, lighting, name, x, y):
+    """A thin metal pole with a small bright point or a downward spot at its top."""
+    h = rng.uniform(2.2, 4.0)
+    bpy.ops.mesh.primitive_cylinder_add(radius=rng.uniform(0.03, 0.07), depth=h, location=(x, y, h / 2), vertices=12)
+    pole = bpy.context.active_object
+    pole.name = name
+    pole.data.materials.append(mats.make("metal"))
+    if rng.random() < 0.5:
+        lighting.point((x, y, h + 0.1), small=rng.random() < 0.6)
+    else:
+        lighting.spot((x, y, h + 0.05), (x + rng.uniform(-1, 1), y + rng.uniform(-1, 1), 0.0))
+
+
+def lighting_label(world_style, room, lamps):
+    """The manifest's lighting class: what lights the set."""
+    base = {"hdri": "hdri", "sky": "sky+sun", "color": "colour", "dark": "lamps only",
+            "night": "night"}[world_style]
+    if room is not None:
+        base = "window"
+    if lamps and base not in ("lamps only", "night"):
+        base += "+lamps"
+    return base
+
+
+def build_scene(seed, photos):
+    rng = random.Random(derived_seed("scene", seed))
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mats = MaterialFactory(rng, photos)
+    lighting = Lighting(rng)
+    archetype = rng.choices([a for a, _ in ARCHETYPES], weights=[w for _, w in ARCHETYPES])[0]
+    extent = rng.uniform(0.6, 1.0) if archetype == "tabletop" else rng.uniform(1.0, 2.2)
+    room = None
+    lamp_kinds = {"area": 30, "spot": 20, "point": 15, "point_small": 15, "sun": 10, "emissive": 10}
+    build = dict(geometry=GEOMETRY, material=None, count=(3, 9))
+    if archetype in ("interior", "window_room"):
+        # interior: sun through the window plus lamps; window_room: only what comes in the window.
+        world_style = rng.choice(["sky", "hdri", "color"] if archetype == "interior" else ["sky", "hdri"])
+        window_only = archetype == "window_room"
+        room = build_room(rng, mats, lighting, sun=not window_only or (world_style == "hdri" and rng.random() < 0.6),
+                          lamp=not window_only)
+        plain_floor(rng, mats, 12.0)
+        extent = min(extent, min(room[0], room[1]) / 2 - 0.6)
+        n_lights = 0 if window_only else rng.randint(0, 3)
+        lamp_kinds["sun"] = 0
+    elif archetype == "exterior":
+        world_style = "sky" if rng.random() < 0.7 else "hdri"
+        plain_floor(rng, mats, 80.0, ("diffuse",))
+        extent = rng.uniform(2.0, 3.5)
+        for i in range(rng.randint(2, 5)):
+            az, r = rng.uniform(0, 2 * math.pi), rng.uniform(extent + 2.0, extent + 9.0)
+            house(rng, mats, "house_%d" % i, r * math.cos(az), r * math.sin(az))
+        n_lights = 0
+        build.update(geometry=[(foliage, 6), (railing, 3), (wires, 2), (primitive, 3), (bevelled_box, 3),
+                               (displaced_blob, 2)], count=(3, 8))
+    elif archetype == "night":
+        world_style = "night"
+        plain_floor(rng, mats, 60.0, ("plastic", "coated"))  # wet, glossy ground
+        extent = rng.uniform(1.5, 3.0)
+        for i in range(rng.randint(1, 4)):
+            az, r = rng.uniform(0, 2 * math.pi), rng.uniform(1.0, extent + 2.0)
+            street_lamp(rng, mats, lighting, "lamp_%d" % i, r * math.cos(az), r * math.sin(az))
+        n_lights = rng.randint(0, 2)
+        lamp_kinds = {"spot": 30, "point": 20, "point_small": 30, "emissive": 20}
+    elif archetype == "glass_emitters":
+        world_style = rng.choices(["dark", "color", "hdri"], weights=[50, 30, 20])[0]
+        build_floor(rng, mats, "studio" if rng.random() < 0.5 else "open")
+        extent = rng.uniform(0.8, 1.6)
+        n_lights = rng.randint(0, 1)  # a fill light; the sparkles come below
+        lamp_kinds = {"area": 70, "spot": 30}
+        build.update(geometry=GLASS_GEOMETRY, material=lambda label: mats.make(rng.choice(["glass", "glass", "rough_glass"])),
+                     count=(2, 5))
+    elif archetype == "metal_hdri":
+        world_style = "hdri"
+        build_floor(rng, mats, rng.choice(["open", "studio"]))
+        n_lights = 0
+        build.update(geometry=SOLID_GEOMETRY,
+                     material=lambda label: mats.make("metal", rough=(0.0, rng.choice([0.02, 0.08, 0.15]))))
+    else:  # open, studio, tabletop, photo, thin
+        layout = rng.choice(["open", "studio", "tabletop"]) if archetype in ("photo", "thin") else archetype
+        mats.photo_all = archetype == "photo"
+        build_floor(rng, mats, layout)
+        world_style = rng.choices(["hdri", "sky", "color", "dark"], weights=[40, 20, 15, 25])[0]
+        n_lights = rng.randint(1 if world_style == "dark" else 0, 4)
+        if archetype == "thin":
+            build.update(geometry=THIN_GEOMETRY, count=(4, 10))
+    world_info = make_world(rng, lighting, world_style,
+                            hdris=OUTDOOR_HDRIS if archetype in ("exterior", "window_room") else HDRI_NAMES)
+    objects = build_objects(rng, mats, archetype, extent, **build)
+    if archetype == "glass_emitters":
+        objects += build_objects(rng, mats, archetype, extent, count=(1, 3), first_index=len(objects))
+        add_sparkles(rng, mats, lighting, extent)
+    add_local_lights(rng, mats, lighting, room, n_lights, lamp_kinds)
     lighting.max_radiance = max(lighting.max_radiance, mats.max_emission)
 
     volume = None
-    if rng.random() < 0.15:
+    if archetype not in ("glass_emitters", "metal_hdri") and rng.random() < 0.15:
         volume = add_volume(rng, mats.log, extent + 3.0 if room is None else room[0] / 2, 4.0 if room is None else room[2])
 
     cam, target, path = build_camera(rng, archetype, extent, room)
-    description = {"archetype": archetype, "world": world_info, "objects": objects, "materials": mats.log,
+    lamps = any(light["type"] in ("AREA", "SPOT", "POINT", "EMISSIVE_OBJECT") for light in lighting.log)
+    description = {"archetype": archetype, "lighting": lighting_label(world_style, room, lamps),
+                   "world": world_info, "objects": objects, "materials": mats.log,
                    "lights": lighting.log, "volume": volume, "camera_move": path[4],
                    "lens_mm": round(cam.data.lens, 2)}
     return cam, target, path, lighting, description, rng
+
+
+def add_sparkles(rng, mats, lighting, extent):
+    """Tiny bright emitters among and inside the glass objects: seen through glass they sparkle."""
+    glass = [o for o in bpy.context.scene.objects if o.type == "MESH" and o.data.materials
+             and "glass" in o.data.materials[0].name]
+    for _ in range(rng.randint(2, 6)):
+        if glass and rng.random() < 0.6:
+            lo, hi = evaluated_bounds(rng.choice(glass))
+            loc = tuple(rng.uniform(lo[i], hi[i]) for i in range(3))
+        else:
+            loc = (rng.uniform(-extent, extent), rng.uniform(-extent, extent), rng.uniform(0.05, 1.2))
+        if rng.random() < 0.6:
+            lighting.point(loc, small=True)
+        else:
+            emissive_sphere(mats, lighting, loc, rng.uniform(0.005, 0.03))
 
 
 # --------------------------------------------------------------------------- rendering
@@ -947,12 +1234,12 @@ def render_to(path, scene, samples, seed, depth):
     scene.render.image_settings.color_depth = depth
     tmp = path + ".tmp%d" % os.getpid()
     scene.render.filepath = tmp
-    t0 = time.time()
+    t0, c0 = time.time(), time.process_time()
     bpy.ops.render.render(write_still=True)
     if not os.path.exists(tmp):
         raise RuntimeError("Blender wrote no file for " + path)
     os.replace(tmp, path)
-    return time.time() - t0
+    return time.time() - t0, time.process_time() - c0
 
 
 def luminance_probe(scene, seed, probe_res=32, samples=16):
@@ -960,7 +1247,7 @@ def luminance_probe(scene, seed, probe_res=32, samples=16):
     saved = (scene.render.resolution_x, scene.render.resolution_y, scene.render.image_settings.file_format,
              scene.render.image_settings.color_depth)
     scene.render.resolution_x = scene.render.resolution_y = probe_res
-    scene.render.image_settings.file_format = "OPEN_EXR"
+    set_file_format(scene.render.image_settings, "OPEN_EXR")
     scene.render.image_settings.color_depth = "32"
     path = os.path.join(bpy.app.tempdir, "probe_%d.exr" % seed)
     render_to(path, scene, samples, derived_seed("probe", seed), "32")
@@ -968,8 +1255,9 @@ def luminance_probe(scene, seed, probe_res=32, samples=16):
     px = list(img.pixels)
     bpy.data.images.remove(img)
     os.remove(path)
-    (scene.render.resolution_x, scene.render.resolution_y, scene.render.image_settings.file_format,
-     scene.render.image_settings.color_depth) = saved
+    scene.render.resolution_x, scene.render.resolution_y = saved[:2]
+    set_file_format(scene.render.image_settings, saved[2])
+    scene.render.image_settings.color_depth = saved[3]
     return [0.2126 * px[i] + 0.7152 * px[i + 1] + 0.0722 * px[i + 2] for i in range(0, len(px), 4)]
 
 
@@ -1023,7 +1311,7 @@ def render_frame(scene, args, k, frame_dir):
     for name in os.listdir(frame_dir):  # leftovers of an interrupted run
         if ".tmp" in name:
             os.remove(os.path.join(frame_dir, name))
-    times, seeds = {}, {}
+    times, cpu, seeds = {}, {}, {}
     jobs = [("spp%d_%02d.exr" % (args.spp, i), args.spp, render_seed(args, "stack", k, i), "16")
             for i in range(args.stacks)]
     jobs += [("gt_%s.exr" % tag, args.gt_spp, render_seed(args, "gt", k, tag), args.gt_depth)
@@ -1032,49 +1320,81 @@ def render_frame(scene, args, k, frame_dir):
         seeds[name] = seed
         path = os.path.join(frame_dir, name)
         if os.path.exists(path):
-            times[name] = None  # rendered by an earlier, interrupted run
+            times[name] = cpu[name] = None  # rendered by an earlier, interrupted run
             continue
-        times[name] = round(render_to(path, scene, samples, seed, depth), 3)
-    return times, seeds
+        wall, cpu_s = render_to(path, scene, samples, seed, depth)
+        times[name], cpu[name] = round(wall, 3), round(cpu_s, 3)
+    return times, cpu, seeds
 
 
-def main():
-    args = parse_args()
-    photos = [os.path.join(PHOTO_DIR, p) for p in PHOTO_NAMES]
-    missing = [p for p in photos if not os.path.exists(p)]
-    if missing:
-        sys.exit("generate.py: photographs missing (%s); install Debian package mate-backgrounds" % missing[0])
-    t_build = time.time()
-    cam, target, path, lighting, description, rng = build_scene(args.seed, photos)
+def time_exr_write(scene, frame_dir):
+    """Seconds to write the last render once more as a multilayer EXR (the profile's write share)."""
+    tmp = os.path.join(frame_dir, "profile.tmp%d" % os.getpid())
+    t0, c0 = time.time(), time.process_time()
+    bpy.data.images["Render Result"].save_render(tmp, scene=scene)
+    seconds, cpu = time.time() - t0, time.process_time() - c0
+    os.remove(tmp)
+    return round(seconds, 4), round(cpu, 4)
+
+
+def render_scene(args, seed, scene_dir, frames, photos):
+    t_build, c_build = time.time(), time.process_time()
+    cam, target, path, lighting, description, rng = build_scene(seed, photos)
     scene = bpy.context.scene
     configure_render(scene, args)
-    exposure = choose_exposure(scene, args.seed, rng, lighting, path, cam, target, args.frames)
+    build_seconds, build_cpu = time.time() - t_build, time.process_time() - c_build
+    t_probe, c_probe = time.time(), time.process_time()
+    exposure = choose_exposure(scene, seed, rng, lighting, path, cam, target, args.frames)
+    probe_seconds, probe_cpu = time.time() - t_probe, time.process_time() - c_probe
     description["exposure"] = exposure
-    os.makedirs(args.scene_dir, exist_ok=True)
-    write_json(os.path.join(args.scene_dir, "scene.json"),
-               {"seed": args.seed, "generator_version": GENERATOR_VERSION, "description": description})
-    build_seconds = time.time() - t_build
-
-    frames = [int(x) for x in args.only_frames.split(",") if x != ""] or list(range(args.frames))
+    os.makedirs(scene_dir, exist_ok=True)
+    write_json(os.path.join(scene_dir, "scene.json"),
+               {"seed": seed, "generator_version": GENERATOR_VERSION, "blender_version": bpy.app.version_string,
+                "description": description})
+    args.seed = seed  # render_seed() reads it
     for k in frames:
         set_camera_frame(cam, target, path, k, args.frames)
-        frame_dir = os.path.join(args.scene_dir, "frame_%d" % k)
+        frame_dir = os.path.join(scene_dir, "frame_%d" % k)
         t0 = time.time()
-        times, seeds = render_frame(scene, args, k, frame_dir)
+        times, cpu, seeds = render_frame(scene, args, k, frame_dir)
+        frame_seconds = time.time() - t0
         meta = {
             "generator_version": GENERATOR_VERSION, "blender_version": bpy.app.version_string,
-            "seed": args.seed, "frame": k, "res": args.res, "spp": args.spp, "stacks": args.stacks,
+            "seed": seed, "frame": k, "res": args.res, "spp": args.spp, "stacks": args.stacks,
             "gt_spp": args.gt_spp, "gt_count": args.gt_count, "gt_depth": args.gt_depth, "threads": args.threads,
-            "seed_tag": args.seed_tag,
-            "render_seeds": seeds, "render_seconds": times, "frame_seconds": round(time.time() - t0, 3),
-            "scene_build_seconds": round(build_seconds, 3),
+            "seed_tag": args.seed_tag, "archetype": description["archetype"], "lighting": description["lighting"],
+            "render_seeds": seeds, "render_seconds": times, "frame_seconds": round(frame_seconds, 3),
+            "render_cpu_seconds": cpu, "scene_build_seconds": round(build_seconds, 3),
+            "scene_build_cpu_seconds": round(build_cpu, 3), "probe_seconds": round(probe_seconds, 3),
+            "probe_cpu_seconds": round(probe_cpu, 3),
             "camera_matrix_world": [list(map(lambda v: round(v, 6), row)) for row in cam.matrix_world],
             "camera_lens_mm": cam.data.lens, "camera_sensor_mm": cam.data.sensor_width,
             "exposure_scale": exposure["exposure_scale"],
             "files": frame_files(args.stacks, args.spp, args.gt_count),
         }
+        if args.profile:
+            meta["exr_write_seconds"], meta["exr_write_cpu_seconds"] = time_exr_write(scene, frame_dir)
         write_json(os.path.join(frame_dir, "meta.json"), meta)
-        print("SCENEGEN frame %d done in %.1fs" % (k, meta["frame_seconds"]), file=sys.stderr, flush=True)
+        print("SCENEGEN frame %d %d done %.2f" % (seed, k, frame_seconds), file=sys.stderr, flush=True)
+
+
+def main():
+    print("SCENEGEN ready %.3f %.3f" % (time.time(), time.process_time()), file=sys.stderr, flush=True)
+    args = parse_args()
+    photos = [os.path.join(PHOTO_DIR, p) for p in PHOTO_NAMES]
+    missing = [p for p in photos if not os.path.exists(p)]
+    if missing:
+        sys.exit("generate.py: photographs missing (%s); install Debian package mate-backgrounds" % missing[0])
+    if args.describe:
+        described = []
+        for seed, _, _ in job_list(args):
+            description = build_scene(seed, photos)[4]
+            described.append({"seed": seed, "archetype": description["archetype"],
+                              "lighting": description["lighting"]})
+        write_json(args.describe, described)
+        return
+    for seed, scene_dir, frames in job_list(args):
+        render_scene(args, seed, scene_dir, frames, photos)
 
 
 if __name__ == "__main__":
