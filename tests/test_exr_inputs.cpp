@@ -570,3 +570,55 @@ TEST_CASE("separate files: EXR, PFM, HDR and an 8-bit PNG, half and float") {
       readSeparateFiles({{"color", dir / "color.hdr"}, {"albedo", dir / "aovs.exr"}});
   CHECK(fromAov.get("albedo").at(2, 1, 0) == doctest::Approx(code(0, 2, 1, 3)));
 }
+
+TEST_CASE("issue 21's case: a tiled, MIP-mapped, DWAA border render with two view layers") {
+  TempDir dir;
+  PartDesc part{"",
+                concat({blenderLayer("ViewLayer"), blenderLayer("ViewLayer.001")}),
+                {40, 16, 70, 50},
+                {0, 0, 160, 90}};
+  part.value = [](const std::string& n, int x, int y, int c) {
+    return code(n.rfind("ViewLayer.001", 0) == 0 ? 5 : 0, x, y, c % 11);
+  };
+  // Level 0 as rendered, then every smaller MIP level down to 1x1, which is
+  // how OpenEXR stores them (same origin, sizes halved and rounded down).
+  OIIO::ImageSpec spec = specOf(part);
+  spec.tile_width = spec.tile_height = 16;
+  spec.attribute("compression", "dwaa");
+  spec.attribute("textureformat", "Plain Texture");  // OpenImageIO then writes MIP levels
+  auto writer = OIIO::ImageOutput::create(dir / "in.exr");
+  REQUIRE(writer->supports("mipmap"));
+  REQUIRE(writer->open(dir / "in.exr", spec));
+  REQUIRE(writer->write_image(OIIO::TypeDesc::FLOAT, pixelsOf(part).data()));
+  for (int level = 1; (spec.width >> (level - 1)) > 1 || (spec.height >> (level - 1)) > 1;
+       ++level) {
+    OIIO::ImageSpec smaller = spec;
+    smaller.width = std::max(1, spec.width >> level);
+    smaller.height = std::max(1, spec.height >> level);
+    REQUIRE(writer->open(dir / "in.exr", smaller, OIIO::ImageOutput::AppendMIPLevel));
+    REQUIRE(writer->write_image(
+        OIIO::TypeDesc::FLOAT,
+        std::vector<float>(smaller.image_pixels() * smaller.nchannels, 9.0f).data()));
+  }
+  REQUIRE(writer->close());
+  auto check = OIIO::ImageInput::open(dir / "in.exr");
+  REQUIRE(check->seek_subimage(0, 1));
+  check->close();
+  const auto in = infoOf(dir / "in.exr").parts[0];
+  REQUIRE(in.tile_width > 0);
+  REQUIRE(in.x == 40);
+
+  ReadOptions read;
+  read.viewLayer = "ViewLayer.001";
+  const FrameBuffers frame = readFrame(dir / "in.exr", read);
+  CHECK(frame.dataWindow == PixelWindow{40, 16, 70, 50});
+  CHECK(frame.get("color").at(10, 20, 1) == doctest::Approx(code(5, 50, 36, 1)).epsilon(0.02));
+  const Image result = constant(70, 50, 3, 0.125f);
+  writeResult(dir / "in.exr", dir / "out.exr", result, writeOptionsFor(frame));
+  const auto out = infoOf(dir / "out.exr");
+  CHECK(PixelWindow{out.parts[0].x, out.parts[0].y, out.parts[0].width, out.parts[0].height} ==
+        frame.dataWindow);
+  CHECK(out.parts[0].full_width == 160);
+  CHECK(countOf(out.channels, "ViewLayer.001.Denoised.A") == 1);
+  CHECK(readImage(dir / "out.exr", 0, {"ViewLayer.001.Denoised.B"}).at(69, 49, 0) == 0.125f);
+}
