@@ -12,11 +12,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <thread>
 
 #include "common/cli.h"
+#include "common/progress.h"
 #include "common/sequence.h"
 #include "dn/io/buffer_io.h"
+#include "dn/io/preview_io.h"
 #include "dn/infer/denoiser.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
@@ -62,11 +65,23 @@ input buffers:
   --channels BUF=C1,C2,C3  take a buffer from these channels (repeatable)
   --view-layer NAME   which view layer of a multilayer file (default: the first)
 output:
-  -o, --output PATH   output file, pattern or folder (required)
+  -o, --output PATH   output file, pattern or folder (required). EXR keeps every
+                      layer; PNG, JPEG and TIFF get the denoised colour through an
+                      OpenColorIO display/view transform (see display, below)
+  --preview PATH      also write that display picture beside the EXR: a file, a
+                      pattern (prev.####.png) for sequences, a folder for many files
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
   --rgb-only          write a plain RGB image, no other layers
-  --float             float result channels (default: half)
+  --float             float result channels (default: half); with a .tif output,
+                      a linear float TIFF instead of a display picture
   --inplace           allow the output to replace the input file
+display (PNG/JPEG/TIFF outputs and --preview):
+  --ocio CONFIG       OpenColorIO config file (default: $OCIO, else the built-in
+                      sRGB config: clamp to [0, 1] and the sRGB curve)
+  --display NAME      display (default: the config's first, e.g. sRGB)
+  --view NAME         view (default: the display's first, e.g. Standard; Blender's
+                      config also offers Filmic)
+  --list-views        print the config's display / view pairs and exit
 resources:
   --tile N            network tile size in pixels (default: from --maxmem, at most 256)
   --overlap N         tile overlap (default 32)
@@ -91,6 +106,9 @@ struct Options {
   bool rgbOnly = false, floatOut = false, inplace = false, verbose = false;
   int repeats = 1;
   DenoiseOptions denoise;
+  std::string preview;
+  tonemap::PreviewOptions display;
+  bool listViews = false;
 };
 
 std::string defaultModelPath() {
@@ -155,6 +173,16 @@ Options parseArgs(int argc, char** argv) {
       o.floatOut = true;
     } else if (args.flag("--inplace")) {
       o.inplace = true;
+    } else if (args.flag("--preview")) {
+      o.preview = args.value("--preview");
+    } else if (args.flag("--ocio")) {
+      o.display.config = args.value("--ocio");
+    } else if (args.flag("--display")) {
+      o.display.display = args.value("--display");
+    } else if (args.flag("--view")) {
+      o.display.view = args.value("--view");
+    } else if (args.flag("--list-views")) {
+      o.listViews = true;
     } else if (args.flag("--tile")) {
       o.denoise.tile = args.intValue("--tile");
     } else if (args.flag("--overlap")) {
@@ -194,6 +222,10 @@ Options parseArgs(int argc, char** argv) {
       o.inputs.push_back(args.positional());
     }
   }
+  if (o.listViews) {
+    std::fputs(tonemap::ocioDescribeConfig(o.display).c_str(), stdout);
+    std::exit(cli::kExitOk);
+  }
   if (o.output.empty()) throw cli::UsageError("no output given: use -o OUT (see --help)");
   if (o.inputs.empty() == o.separateFiles.empty())
     throw cli::UsageError(o.inputs.empty()
@@ -232,9 +264,53 @@ std::vector<std::pair<std::string, std::string>> planJobs(const Options& o) {
   return jobs;
 }
 
-std::string clockText(double seconds) {
-  int s = static_cast<int>(std::lround(seconds));
-  return fmt::format("{:02d}:{:02d}", s / 60, s % 60);
+// Where each job's --preview picture goes: numbered like the output for a
+// pattern, named like the output in a folder, or the one file given.
+std::vector<std::string> planPreviews(
+    const Options& o, const std::vector<std::pair<std::string, std::string>>& jobs) {
+  if (o.preview.empty()) return {};
+  if (outputKindFor(o.preview) != OutputKind::Display)
+    throw cli::UsageError("--preview takes a PNG, JPEG or TIFF picture, not '" + o.preview + "'");
+  const cli::FramePattern previewPattern = cli::parseFramePattern(o.preview);
+  const cli::FramePattern outPattern = cli::parseFramePattern(o.output);
+  std::vector<std::string> previews;
+  for (const auto& [input, output] : jobs) {
+    if (previewPattern.padding > 0) {
+      if (outPattern.padding == 0)
+        throw cli::UsageError("--preview: a pattern goes with a frame sequence output");
+      const std::string number =
+          output.substr(outPattern.prefix.size(),
+                        output.size() - outPattern.prefix.size() - outPattern.suffix.size());
+      previews.push_back(cli::frameName(previewPattern, std::stoi(number)));
+    } else if (fs::is_directory(o.preview)) {
+      previews.push_back(
+          (fs::path(o.preview) / fs::path(output).filename().replace_extension(".png")).string());
+    } else if (jobs.size() == 1) {
+      previews.push_back(o.preview);
+    } else {
+      throw cli::UsageError(
+          "--preview: several outputs need a pattern such as prev.####.png or an existing folder");
+    }
+    if (previews.back() == output)
+      throw cli::UsageError("--preview " + previews.back() + " is the output itself");
+  }
+  return previews;
+}
+
+// The display transform, built (and its config, display and view checked)
+// before the model loads, when some picture needs it.
+std::optional<tonemap::OcioDisplay> displayFor(
+    const Options& o, const std::vector<std::pair<std::string, std::string>>& jobs) {
+  bool needed = !o.preview.empty();
+  for (const auto& job : jobs)
+    needed |= outputKindFor(job.second, o.floatOut) == OutputKind::Display;
+  if (!needed && !(o.display.config + o.display.display + o.display.view).empty())
+    throw cli::UsageError(
+        "--ocio, --display and --view apply to PNG, JPEG or TIFF outputs and --preview");
+  if (!needed) return std::nullopt;
+  std::optional<tonemap::OcioDisplay> display(std::in_place, o.display);
+  if (o.verbose) fmt::print(stderr, "dndenoise: pictures through {}\n", display->description());
+  return display;
 }
 
 // Counts what the model will not see as radiance: NaN/Inf and negative values.
@@ -293,6 +369,8 @@ FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::st
 
 int run(Options o) {
   auto jobs = planJobs(o);
+  const std::vector<std::string> previews = planPreviews(o, jobs);
+  const std::optional<tonemap::OcioDisplay> display = displayFor(o, jobs);
   const auto loadStart = Clock::now();
   Denoiser denoiser = [&] {
     try {
@@ -306,6 +384,8 @@ int run(Options o) {
                std::chrono::duration<double>(Clock::now() - loadStart).count());
 
   int status = cli::kExitOk;
+  std::optional<cli::Progress> progress;
+  if (o.verbose) progress.emplace(stderr);
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const auto& [input, output] = jobs[j];
     const std::string name = input.empty() ? o.separateFiles.at("color") : input;
@@ -317,12 +397,13 @@ int run(Options o) {
 
     DenoiseOptions options = o.denoise;
     const auto start = Clock::now();
-    if (o.verbose)
+    if (progress)
       options.progress = [&, j](double f) {
         double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-        fmt::print(stderr, "\rdndenoise: [{}/{}] {:3.0f}%  elapsed {}  ETA {}   ", j + 1,
-                   jobs.size(), 100 * f, clockText(elapsed),
-                   clockText(f > 0 ? elapsed * (1 - f) / f : 0));
+        progress->update((j + f) / jobs.size(),
+                         fmt::format("dndenoise: [{}/{}] {:3.0f}%  elapsed {}  ETA {}", j + 1,
+                                     jobs.size(), 100 * f, cli::formatDuration(elapsed),
+                                     cli::formatDuration(f > 0 ? elapsed * (1 - f) / f : 0)));
       };
     std::vector<double> times;
     DenoiseResult result;
@@ -331,7 +412,7 @@ int run(Options o) {
       result = denoiser.denoise(frame, options);
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }
-    if (o.verbose) fmt::print(stderr, "\n");
+    if (progress) progress->finish();
     if (o.verbose || o.repeats > 1) {
       std::sort(times.begin(), times.end());
       fmt::print(
@@ -347,18 +428,26 @@ int run(Options o) {
           times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     }
 
-    WriteOptions write;
-    // A sun or lamp above half's range (65504) would be written as Inf.
-    write.half = !o.floatOut && fitsHalf(result.color);
-    if (o.verbose && !o.floatOut && !write.half)
-      fmt::print(stderr, "dndenoise: {}: values above the half range, result written as float\n",
-                 name);
-    write.rgbOnly = o.rgbOnly || input.empty();
-    write.layer = layerPrefixOf(frame) + o.layer;
-    if (!result.uncertainty.empty() && !write.rgbOnly)
-      write.extraLayers[layerPrefixOf(frame) + "uncertainty"] = result.uncertainty;
-    writeResult(input.empty() ? name : input, output, result.color, write, o.inplace);
-    if (o.verbose) fmt::print(stderr, "dndenoise: wrote {}\n", output);
+    const OutputKind kind = outputKindFor(output, o.floatOut);
+    if (kind == OutputKind::Display) {
+      writeDisplayImage(output, result.color, *display);
+    } else {
+      WriteOptions write;
+      // A sun or lamp above half's range (65504) would be written as Inf.
+      write.half = !o.floatOut && fitsHalf(result.color);
+      if (o.verbose && !o.floatOut && !write.half)
+        fmt::print(stderr, "dndenoise: {}: values above the half range, result written as float\n",
+                   name);
+      write.rgbOnly = o.rgbOnly || input.empty() || kind == OutputKind::LinearRgb;
+      write.layer = layerPrefixOf(frame) + o.layer;
+      if (!result.uncertainty.empty() && !write.rgbOnly)
+        write.extraLayers[layerPrefixOf(frame) + "uncertainty"] = result.uncertainty;
+      writeResult(input.empty() ? name : input, output, result.color, write, o.inplace);
+    }
+    if (!previews.empty()) writeDisplayImage(previews[j], result.color, *display);
+    if (o.verbose)
+      fmt::print(stderr, "dndenoise: wrote {}{}\n", output,
+                 previews.empty() ? "" : " and " + previews[j]);
     if (!o.reference.empty() && o.maxError >= 0) checkAgainstReference(o, result.color, status);
   }
   return status;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <set>
 
 #include <unistd.h>
@@ -386,12 +387,21 @@ bool fitsHalf(const Image& image) {
 
 void writeImage(const std::string& path, const Image& image, bool half,
                 const std::vector<std::string>& channelNames) {
+  writeImage(path, image, half ? PixelType::Half : PixelType::Float, channelNames);
+}
+
+void writeImage(const std::string& path, const Image& image, PixelType type,
+                const std::vector<std::string>& channelNames) {
+  static const std::map<PixelType, OIIO::TypeDesc> kTypes = {
+      {PixelType::Half, OIIO::TypeDesc::HALF},
+      {PixelType::Float, OIIO::TypeDesc::FLOAT},
+      {PixelType::UInt8, OIIO::TypeDesc::UINT8},
+      {PixelType::UInt16, OIIO::TypeDesc::UINT16}};
   if (image.empty()) fail(path, "refusing to write an empty image");
   writeAtomically(path, [&](const std::string& tmp) {
     if (hasExtension(path, ".pfm")) return writePfm(tmp, path, image);
     auto out = createOutput(tmp, path);
-    OIIO::ImageSpec spec(image.width, image.height, image.channels,
-                         half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+    OIIO::ImageSpec spec(image.width, image.height, image.channels, kTypes.at(type));
     if (!channelNames.empty()) spec.channelnames = channelNames;
     if (!out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data()) ||
         !out->close())
