@@ -515,7 +515,7 @@ int run(const Options& o) {
         }(),
         firstStep, o.steps);
 
-  cli::Progress progress(stderr, kTrainingLineSeconds);
+  cli::Progress progress(stderr, cli::kTrainingLineSeconds);
   bool stop = false;  // agreed by all ranks, so they leave the loop together
   while (trainer.stepCount() < o.steps && !(stop = averager->any(stopRequested))) {
     TrainBatch batch = source.batch(trainer.stepCount());
