@@ -68,8 +68,8 @@ output:
   -o, --output PATH   output file, pattern or folder (required). EXR keeps every
                       layer; PNG, JPEG and TIFF get the denoised colour through an
                       OpenColorIO display/view transform (see display, below)
-  --preview PATH      also write that display picture beside the EXR: a file, a
-                      pattern (prev.####.png) for sequences, a folder for many files
+  --preview PATH      also write that display picture beside the EXR: a file, or
+                      a folder for sequences and many files (DIR/<output name>.png)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
   --rgb-only          write a plain RGB image, no other layers
   --float             float result channels (default: half); with a .tif output,
@@ -264,34 +264,22 @@ std::vector<std::pair<std::string, std::string>> planJobs(const Options& o) {
   return jobs;
 }
 
-// Where each job's --preview picture goes: numbered like the output for a
-// pattern, named like the output in a folder, or the one file given.
+// Where each job's --preview picture goes: the one file given, or in a folder
+// under the output's name (out.0001.exr -> DIR/out.0001.png) for many outputs.
 std::vector<std::string> planPreviews(
     const Options& o, const std::vector<std::pair<std::string, std::string>>& jobs) {
   if (o.preview.empty()) return {};
-  if (outputKindFor(o.preview) != OutputKind::Display)
-    throw cli::UsageError("--preview takes a PNG, JPEG or TIFF picture, not '" + o.preview + "'");
-  const cli::FramePattern previewPattern = cli::parseFramePattern(o.preview);
-  const cli::FramePattern outPattern = cli::parseFramePattern(o.output);
+  const bool folder = fs::is_directory(o.preview);
+  if (!folder && outputKindFor(o.preview) != OutputKind::Display)
+    throw cli::UsageError("--preview takes a PNG, JPEG or TIFF picture or a folder, not '" +
+                          o.preview + "'");
+  if (!folder && jobs.size() > 1)
+    throw cli::UsageError("--preview: several outputs need an existing folder for their pictures");
   std::vector<std::string> previews;
-  for (const auto& [input, output] : jobs) {
-    if (previewPattern.padding > 0) {
-      if (outPattern.padding == 0)
-        throw cli::UsageError("--preview: a pattern goes with a frame sequence output");
-      const std::string number =
-          output.substr(outPattern.prefix.size(),
-                        output.size() - outPattern.prefix.size() - outPattern.suffix.size());
-      previews.push_back(cli::frameName(previewPattern, std::stoi(number)));
-    } else if (fs::is_directory(o.preview)) {
-      previews.push_back(
-          (fs::path(o.preview) / fs::path(output).filename().replace_extension(".png")).string());
-    } else if (jobs.size() == 1) {
-      previews.push_back(o.preview);
-    } else {
-      throw cli::UsageError(
-          "--preview: several outputs need a pattern such as prev.####.png or an existing folder");
-    }
-    if (previews.back() == output)
+  for (const auto& job : jobs) {
+    const fs::path name = fs::path(job.second).filename().replace_extension(".png");
+    previews.push_back(folder ? (fs::path(o.preview) / name).string() : o.preview);
+    if (previews.back() == job.second)
       throw cli::UsageError("--preview " + previews.back() + " is the output itself");
   }
   return previews;

@@ -7,6 +7,7 @@ as plain lines when stderr is not a terminal. A tiny model trained in seconds
 stands in for the shipped one."""
 import argparse
 import os
+import pty
 import re
 import shutil
 import subprocess
@@ -32,6 +33,25 @@ def max_difference(a, b):
         return 0.0
     levels = 65535 if a.endswith(".tif") else 255
     return float(m.group(1)) * levels
+
+
+def stderr_on_terminal(cmd, env):
+    """What cmd writes to stderr when stderr is a pseudo-terminal (which turns "\\n" into "\\r\\n")."""
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=slave, env=env)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            data = os.read(master, 4096)
+        except OSError:  # EIO: the child closed the terminal
+            break
+        if not data:
+            break
+        chunks.append(data)
+    proc.wait()
+    os.close(master)
+    return b"".join(chunks).decode(errors="replace")
 
 
 def main():
@@ -79,6 +99,11 @@ def main():
     check("-v off a terminal: plain progress lines, no carriage returns",
           "\r" not in out.stderr and 2 <= len(progress) <= 11, out.stderr)
 
+    # On a terminal the same progress is one line redrawn in place.
+    tty_err = stderr_on_terminal(denoise + ["-v", frame, "-o", p("tty.exr")], env)
+    check("-v on a terminal: the progress line is redrawn with carriage returns",
+          len(re.findall("\r(?!\n)", tty_err)) >= 2 and "[1/1] 100%" in tty_err, repr(tty_err))
+
     # OpenColorIO through OpenImageIO on the same linear result.
     run(["oiiotool", p("linear.exr"), "--colorconfig", srgb_config, "--ociodisplay:from=lin_rec709", "sRGB",
          "Standard", "-d", "uint8", "-o", p("oiio_srgb.png")])
@@ -119,11 +144,14 @@ def main():
     for n in (1, 2):
         shutil.copy(frame, p(f"shot.{n:04d}.exr"))
     os.makedirs(p("seq"))
-    out = run(denoise + [p("shot.####.exr"), "-o", p("seq", "out.####.exr"), "--preview", p("seq", "prev.####.png")],
-              env=env)
-    made = sorted(os.listdir(p("seq")))
+    os.makedirs(p("prev"))
+    out = run(denoise + [p("shot.####.exr"), "-o", p("seq", "out.####.exr"), "--preview", p("prev")], env=env)
+    made = sorted(os.listdir(p("seq"))) + sorted(os.listdir(p("prev")))
     check("a sequence gets an EXR and a preview per frame", out.returncode == 0 and made == [
-        "out.0001.exr", "out.0002.exr", "prev.0001.png", "prev.0002.png"], f"{made} {out.stderr}")
+        "out.0001.exr", "out.0002.exr", "out.0001.png", "out.0002.png"], f"{made} {out.stderr}")
+    expect_error("--preview of one file for a sequence",
+                 denoise + [p("shot.####.exr"), "-o", p("seq", "again.####.exr"), "--preview", p("one.png")],
+                 "--preview: several outputs need an existing folder", p("seq", "again.0001.exr"))
 
     # Wrong names fail at once, before any denoising, with nothing written.
     expect_error("--view that the config lacks", denoise + [frame, "-o", p("bad1.png"), "--view", "AgX"],
@@ -131,7 +159,7 @@ def main():
     expect_error("--ocio of a missing file", denoise + [frame, "-o", p("bad2.png"), "--ocio", p("none.ocio")],
                  p("none.ocio"), p("bad2.png"))
     expect_error("--preview as EXR", denoise + [frame, "-o", p("x.exr"), "--preview", p("bad3.exr")],
-                 "--preview takes a PNG, JPEG or TIFF picture", p("x.exr"))
+                 "--preview takes a PNG, JPEG or TIFF picture or a folder", p("x.exr"))
     expect_error("--view without a picture", denoise + [frame, "-o", p("y.exr"), "--view", "Standard"],
                  "--view apply to PNG, JPEG or TIFF outputs", p("y.exr"))
     return summary()
