@@ -389,8 +389,9 @@ int run(Options o) {
       options.progress = [&, j](double f) {
         double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
         progress->update((j + f) / jobs.size(),
-                         fmt::format("dndenoise: [{}/{}] {:3.0f}%  elapsed {}  ETA {}", j + 1,
-                                     jobs.size(), 100 * f, cli::formatDuration(elapsed),
+                         fmt::format("dndenoise: {} [{}/{}] {:3.0f}%  elapsed {}  ETA {}",
+                                     fs::path(name).filename().string(), j + 1, jobs.size(),
+                                     100 * f, cli::formatDuration(elapsed),
                                      cli::formatDuration(f > 0 ? elapsed * (1 - f) / f : 0)));
       };
     std::vector<double> times;
