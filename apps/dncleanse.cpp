@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "common/cli.h"
+#include "common/progress.h"
 #include "dn/io/buffer_io.h"
 #include "dn/data/dataset.h"
 #include "dn/nn/kernel_net.h"
@@ -107,13 +108,6 @@ std::string jsonString(const std::string& text) {
       out += c;
   }
   return out + "\"";
-}
-
-std::string duration(double seconds) {
-  const int s = int(seconds);
-  if (s >= 3600) return fmt::format("{}h{:02d}m", s / 3600, s % 3600 / 60);
-  if (s >= 60) return fmt::format("{}m{:02d}s", s / 60, s % 60);
-  return fmt::format("{}s", s);
 }
 
 // ---------------------------------------------------------------- train
@@ -378,8 +372,8 @@ int runTrain(cli::Args& args) {
   std::signal(SIGINT, onStopSignal);
   std::signal(SIGTERM, onStopSignal);
   const auto start = Clock::now();
-  auto last_checkpoint = start, last_progress = start;
-  const bool tty = ::isatty(STDERR_FILENO);
+  auto last_checkpoint = start;
+  cli::Progress progress(stderr, cli::kTrainingLineSeconds);
   double window_loss = 0, window_identity = 0, last_val = -1;
   int window_steps = 0;
   const int64_t first_step = trainer.stepCount();
@@ -421,24 +415,20 @@ int runTrain(cli::Args& args) {
           last_val, identity_val));
     }
     const auto now = Clock::now();
-    if (tty || now - last_progress > std::chrono::seconds(30) || step == o.steps) {
-      const double eta = (o.steps - step) * o.batch / std::max(rate, 1e-9);
-      const std::string val =
-          last_val >= 0 ? fmt::format("  val {:.4f} (identity {:.4f})", last_val, identity_val)
-                        : "";
-      std::fprintf(
-          stderr, "%s",
-          fmt::format("{}step {}/{}  loss {:.4f}{}  {:.1f} samples/s  elapsed {}  eta {}{}",
-                      tty ? "\r" : "", step, o.steps, window_loss / window_steps, val, rate,
-                      duration(seconds_before + elapsed()), duration(eta), tty ? "\033[K" : "\n")
-              .c_str());
-      last_progress = now;
-    }
+    const double eta = (o.steps - step) * o.batch / std::max(rate, 1e-9);
+    const std::string val =
+        last_val >= 0 ? fmt::format("  val {:.4f} (identity {:.4f})", last_val, identity_val) : "";
+    progress.update(
+        double(step) / o.steps,
+        fmt::format("step {}/{}  loss {:.4f}{}  {:.1f} samples/s  elapsed {}  eta {}", step,
+                    o.steps, window_loss / window_steps, val, rate,
+                    cli::formatDuration(seconds_before + elapsed()), cli::formatDuration(eta)),
+        now);
     if (window_steps == 10) window_loss = 0, window_identity = 0, window_steps = 0;
     if (now - last_checkpoint > std::chrono::duration<double>(o.checkpoint_minutes * 60)) save();
   }
   save();
-  if (tty) std::fputs("\n", stderr);
+  progress.finish();
   if (g_stop_signal) {
     std::fprintf(stderr,
                  "dncleanse: stopped at step %lld; checkpoint %s (continue with --resume)\n",
@@ -484,7 +474,7 @@ int runApply(cli::Args& args) {
   read.only = requiredBuffers(model.info.net);
   int written = 0, skipped = 0;
   const auto start = Clock::now();
-  const bool tty = ::isatty(STDERR_FILENO);
+  cli::Progress progress(stderr);
   for (size_t i = 0; i < frames.size(); ++i) {
     const fs::path dir(frames[i].dir);
     const auto out = (dir / "gt_clean.exr").string();
@@ -496,14 +486,13 @@ int runApply(cli::Args& args) {
     writeImage(out, runKernelNet(model.net, frame), false, {"R", "G", "B"});
     ++written;
     const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-    if (tty || written % 100 == 0 || i + 1 == frames.size())
-      std::fprintf(stderr, "%sframe %zu/%zu  %.2f s/frame%s", tty ? "\r" : "", i + 1, frames.size(),
-                   seconds / written, tty ? "\033[K" : "\n");
+    progress.update(double(i + 1) / frames.size(), fmt::format("frame {}/{}  {:.2f} s/frame", i + 1,
+                                                               frames.size(), seconds / written));
   }
-  if (tty && written > 0) std::fputs("\n", stderr);
+  progress.finish();
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   std::fprintf(stderr, "dncleanse: wrote %d gt_clean.exr, skipped %d existing (%s)\n", written,
-               skipped, duration(seconds).c_str());
+               skipped, cli::formatDuration(seconds).c_str());
   return cli::kExitOk;
 }
 

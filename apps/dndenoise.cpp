@@ -12,11 +12,14 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <thread>
 
 #include "common/cli.h"
+#include "common/progress.h"
 #include "common/sequence.h"
+#include "dn/io/preview_io.h"
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
 #include "dn/metrics.h"
@@ -66,11 +69,23 @@ input buffers:
   --buffers LIST      use only these buffers (e.g. color,albedo), to compare buffer
                       sets (default: every buffer the model knows that the input has)
 output:
-  -o, --output PATH   output file, pattern or folder (required)
+  -o, --output PATH   output file, pattern or folder (required). EXR keeps every
+                      layer; PNG, JPEG and TIFF get the denoised colour through an
+                      OpenColorIO display/view transform (see display, below)
+  --preview PATH      also write that display picture beside the EXR: a file, or
+                      a folder for sequences and many files (DIR/<output name>.png)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
   --rgb-only          write a plain RGB image, no other layers
-  --float             float result channels (default: half)
+  --float             float result channels (default: half); with a .tif output,
+                      a linear float TIFF instead of a display picture
   --inplace           allow the output to replace the input file
+display (PNG/JPEG/TIFF outputs and --preview):
+  --ocio CONFIG       OpenColorIO config file (default: $OCIO, else the built-in
+                      sRGB config: clamp to [0, 1] and the sRGB curve)
+  --display NAME      display (default: the config's first, e.g. sRGB)
+  --view NAME         view (default: the display's first, e.g. Standard; Blender's
+                      config also offers Filmic)
+  --list-views        print the config's display / view pairs and exit
 resources:
   --tile N            network tile size in pixels (default: from --maxmem, at most 256)
   --overlap N         tile overlap (default 32)
@@ -96,6 +111,9 @@ struct Options {
   bool rgbOnly = false, floatOut = false, inplace = false, verbose = false;
   int repeats = 1;
   DenoiseOptions denoise;
+  std::string preview;
+  tonemap::PreviewOptions display;
+  bool listViews = false;
 };
 
 std::string defaultModelPath() {
@@ -175,6 +193,16 @@ Options parseArgs(int argc, char** argv) {
       o.floatOut = true;
     } else if (args.flag("--inplace")) {
       o.inplace = true;
+    } else if (args.flag("--preview")) {
+      o.preview = args.value("--preview");
+    } else if (args.flag("--ocio")) {
+      o.display.config = args.value("--ocio");
+    } else if (args.flag("--display")) {
+      o.display.display = args.value("--display");
+    } else if (args.flag("--view")) {
+      o.display.view = args.value("--view");
+    } else if (args.flag("--list-views")) {
+      o.listViews = true;
     } else if (args.flag("--tile")) {
       o.denoise.tile = args.intValue("--tile");
     } else if (args.flag("--overlap")) {
@@ -214,6 +242,10 @@ Options parseArgs(int argc, char** argv) {
       o.inputs.push_back(args.positional());
     }
   }
+  if (o.listViews) {
+    std::fputs(tonemap::ocioDescribeConfig(o.display).c_str(), stdout);
+    std::exit(cli::kExitOk);
+  }
   if (o.output.empty()) throw cli::UsageError("no output given: use -o OUT (see --help)");
   if (o.inputs.empty() == o.separateFiles.empty())
     throw cli::UsageError(o.inputs.empty()
@@ -252,9 +284,41 @@ std::vector<std::pair<std::string, std::string>> planJobs(const Options& o) {
   return jobs;
 }
 
-std::string clockText(double seconds) {
-  int s = static_cast<int>(std::lround(seconds));
-  return fmt::format("{:02d}:{:02d}", s / 60, s % 60);
+// Where each job's --preview picture goes: the one file given, or in a folder
+// under the output's name (out.0001.exr -> DIR/out.0001.png) for many outputs.
+std::vector<std::string> planPreviews(
+    const Options& o, const std::vector<std::pair<std::string, std::string>>& jobs) {
+  if (o.preview.empty()) return {};
+  const bool folder = fs::is_directory(o.preview);
+  if (!folder && outputKindFor(o.preview) != OutputKind::Display)
+    throw cli::UsageError("--preview takes a PNG, JPEG or TIFF picture or a folder, not '" +
+                          o.preview + "'");
+  if (!folder && jobs.size() > 1)
+    throw cli::UsageError("--preview: several outputs need an existing folder for their pictures");
+  std::vector<std::string> previews;
+  for (const auto& job : jobs) {
+    const fs::path name = fs::path(job.second).filename().replace_extension(".png");
+    previews.push_back(folder ? (fs::path(o.preview) / name).string() : o.preview);
+    if (previews.back() == job.second)
+      throw cli::UsageError("--preview " + previews.back() + " is the output itself");
+  }
+  return previews;
+}
+
+// The display transform, built (and its config, display and view checked)
+// before the model loads, when some picture needs it.
+std::optional<tonemap::OcioDisplay> displayFor(
+    const Options& o, const std::vector<std::pair<std::string, std::string>>& jobs) {
+  bool needed = !o.preview.empty();
+  for (const auto& job : jobs)
+    needed |= outputKindFor(job.second, o.floatOut) == OutputKind::Display;
+  if (!needed && !(o.display.config + o.display.display + o.display.view).empty())
+    throw cli::UsageError(
+        "--ocio, --display and --view apply to PNG, JPEG or TIFF outputs and --preview");
+  if (!needed) return std::nullopt;
+  std::optional<tonemap::OcioDisplay> display(std::in_place, o.display);
+  if (o.verbose) fmt::print(stderr, "dndenoise: pictures through {}\n", display->description());
+  return display;
 }
 
 // Counts what the model will not see as radiance: NaN/Inf and negative values.
@@ -337,6 +401,8 @@ FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::st
 
 int run(Options o) {
   auto jobs = planJobs(o);
+  const std::vector<std::string> previews = planPreviews(o, jobs);
+  const std::optional<tonemap::OcioDisplay> display = displayFor(o, jobs);
   const auto loadStart = Clock::now();
   Denoiser denoiser = [&] {
     try {
@@ -350,6 +416,8 @@ int run(Options o) {
                std::chrono::duration<double>(Clock::now() - loadStart).count());
 
   int status = cli::kExitOk;
+  std::optional<cli::Progress> progress;
+  if (o.verbose) progress.emplace(stderr);
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const auto& [input, output] = jobs[j];
     const std::string name = input.empty() ? o.separateFiles.at("color") : input;
@@ -365,12 +433,14 @@ int run(Options o) {
     DenoiseOptions options = o.denoise;
     options.device = torch::Device(o.device);
     const auto start = Clock::now();
-    if (o.verbose)
+    if (progress)
       options.progress = [&, j](double f) {
         double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-        fmt::print(stderr, "\rdndenoise: [{}/{}] {:3.0f}%  elapsed {}  ETA {}   ", j + 1,
-                   jobs.size(), 100 * f, clockText(elapsed),
-                   clockText(f > 0 ? elapsed * (1 - f) / f : 0));
+        progress->update((j + f) / jobs.size(),
+                         fmt::format("dndenoise: {} [{}/{}] {:3.0f}%  elapsed {}  ETA {}",
+                                     fs::path(name).filename().string(), j + 1, jobs.size(),
+                                     100 * f, cli::formatDuration(elapsed),
+                                     cli::formatDuration(f > 0 ? elapsed * (1 - f) / f : 0)));
       };
     std::vector<double> times;
     DenoiseResult result;
@@ -379,7 +449,7 @@ int run(Options o) {
       result = denoiser.denoise(frame, options);
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }
-    if (o.verbose) fmt::print(stderr, "\n");
+    if (progress) progress->finish();
     if (o.verbose)
       reportBuffers(name, result.buffersUsed,
                     input.empty() ? frame.names() : allowed(o, availableBuffers(input, o.read)));
@@ -406,18 +476,26 @@ int run(Options o) {
           times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     }
 
-    WriteOptions write = writeOptionsFor(frame);  // its data window and alpha
-    // A sun or lamp above half's range (65504) would be written as Inf.
-    write.half = !o.floatOut && fitsHalf(result.color);
-    if (o.verbose && !o.floatOut && !write.half)
-      fmt::print(stderr, "dndenoise: {}: values above the half range, result written as float\n",
-                 name);
-    write.rgbOnly = o.rgbOnly || input.empty();
-    write.layer = layerPrefixOf(frame) + o.layer;
-    if (!result.uncertainty.empty() && !write.rgbOnly)
-      write.extraLayers[layerPrefixOf(frame) + "uncertainty"] = result.uncertainty;
-    writeResult(input.empty() ? name : input, output, result.color, write, o.inplace);
-    if (o.verbose) fmt::print(stderr, "dndenoise: wrote {}\n", output);
+    const OutputKind kind = outputKindFor(output, o.floatOut);
+    if (kind == OutputKind::Display) {
+      writeDisplayImage(output, result.color, *display);
+    } else {
+      WriteOptions write = writeOptionsFor(frame);  // its data window and alpha
+      // A sun or lamp above half's range (65504) would be written as Inf.
+      write.half = !o.floatOut && fitsHalf(result.color);
+      if (o.verbose && !o.floatOut && !write.half)
+        fmt::print(stderr, "dndenoise: {}: values above the half range, result written as float\n",
+                   name);
+      write.rgbOnly = o.rgbOnly || input.empty() || kind == OutputKind::LinearRgb;
+      write.layer = layerPrefixOf(frame) + o.layer;
+      if (!result.uncertainty.empty() && !write.rgbOnly)
+        write.extraLayers[layerPrefixOf(frame) + "uncertainty"] = result.uncertainty;
+      writeResult(input.empty() ? name : input, output, result.color, write, o.inplace);
+    }
+    if (!previews.empty()) writeDisplayImage(previews[j], result.color, *display);
+    if (o.verbose)
+      fmt::print(stderr, "dndenoise: wrote {}{}\n", output,
+                 previews.empty() ? "" : " and " + previews[j]);
     if (!o.reference.empty() && o.maxError >= 0) checkAgainstReference(o, result.color, status);
   }
   return status;

@@ -9,9 +9,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <set>
 
 #include "common/cli.h"
+#include "common/progress.h"
 #include "dn/io/buffer_io.h"
 #include "dn/flip.h"
 #include "dn/metrics.h"
@@ -42,6 +44,7 @@ options:
                          (default: the colour of the file, or its Denoised layer if present)
   --nonfinite error|zero NaN/Inf pixels: fail (default) or count them as 0 and report
   --threads N            worker threads (default: all cores)
+  -v                     progress file by file on stderr
   -h, --help             this text
 exit codes: 0 ok, 1 bad input or arguments, 2 a --maxerror check failed
 )";
@@ -54,6 +57,7 @@ struct Options {
   std::vector<std::pair<std::string, double>> maxErrors;
   std::vector<std::string> refChannels, testChannels;
   bool zeroNonFinite = false;
+  bool verbose = false;
 };
 
 Options parseArgs(int argc, char** argv) {
@@ -92,6 +96,8 @@ Options parseArgs(int argc, char** argv) {
       o.zeroNonFinite = v == "zero";
     } else if (args.flag("--threads")) {
       kernelThreadCount() = args.intValue("--threads");
+    } else if (args.flag("-v", "--verbose")) {
+      o.verbose = true;
     } else if (args.peek().size() > 1 && args.peek()[0] == '-') {
       throw cli::UsageError("unknown option '" + args.peek() + "' (see --help)");
     } else {
@@ -273,7 +279,12 @@ int run(const Options& o) {
   std::vector<Row> rows;
   std::string loadedRef;  // a shared reference is read once
   Image ref;
+  std::optional<cli::Progress> progress;
+  if (o.verbose) progress.emplace(stderr);
   for (const auto& [refPath, testPath, name] : pairs) {
+    if (progress)
+      progress->update(double(rows.size()) / pairs.size(),
+                       fmt::format("dnmetrics: [{}/{}] {}", rows.size() + 1, pairs.size(), name));
     std::size_t nonFinite = 0;
     if (refPath != loadedRef) {
       ref = loadChecked(refPath, o.refChannels, false, o.zeroNonFinite, nonFinite);
@@ -287,6 +298,7 @@ int run(const Options& o) {
     if (!o.heatmap.empty()) writeHeatmap(o.heatmap, comparison);
     rows.push_back({name, comparison.values});
   }
+  if (progress) progress->finish();
   print(o, rows);
 
   int status = cli::kExitOk;

@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "common/cli.h"
+#include "common/progress.h"
 #include "dn/data/training_data.h"
 #include "dn/diffusion/sampler.h"
 #include "dn/infer/denoiser.h"
@@ -555,6 +556,7 @@ int run(const Options& o) {
         }(),
         firstStep, o.steps);
 
+  cli::Progress progress(stderr, cli::kTrainingLineSeconds);
   bool stop = false;  // agreed by all ranks, so they leave the loop together
   while (trainer.stepCount() < o.steps && !(stop = averager->any(stopRequested))) {
     TrainBatch batch = source.batch(trainer.stepCount());
@@ -570,8 +572,12 @@ int run(const Options& o) {
     if (val && (stats.step % o.valEvery == 0 || stats.step == o.steps))
       log << ", " << validate(trainer, *val, tonemap::curveFromName(info.tonemap));
     log << "}\n" << std::flush;
-    fmt::print(stderr, "\rdntrain {}: step {}/{}  loss {:.4f}  {:.1f} samples/s  ETA {:.0f} min   ",
-               o.mode, stats.step, o.steps, stats.loss, rate, eta / 60);
+    progress.update(
+        double(stats.step) / o.steps,
+        fmt::format("dntrain {}: step {}/{}  loss {:.4f}  {:.1f} samples/s  elapsed {}  "
+                    "ETA {}",
+                    o.mode, stats.step, o.steps, stats.loss, rate, cli::formatDuration(elapsed),
+                    cli::formatDuration(eta)));
     if (std::chrono::duration<double>(Clock::now() - lastCheckpoint).count() >
         60 * o.checkpointMinutes) {
       trainer.saveCheckpoint(o.checkpoint);
@@ -579,7 +585,7 @@ int run(const Options& o) {
     }
   }
   if (!isMain) return stop ? 130 : cli::kExitOk;
-  fmt::print(stderr, "\n");
+  progress.finish();
   trainer.saveCheckpoint(o.checkpoint);
   if (stop) {
     fmt::print(stderr,

@@ -76,8 +76,11 @@ def clamp6(rgb):
 
 
 def figure_tonemap(rgb):
-    """The paper's figure curve 0.47 * v^(1/2.4) on radiance clamped to [0, 6]: 8-bit sRGB-ish."""
-    return (np.clip(0.47 * clamp6(rgb) ** (1 / 2.4), 0, 1) * 255 + 0.5).astype(np.uint8)
+    """dndenoise's default display transform (libtonemap/ocio/srgb.ocio, what -o out.png and
+    --preview write): clamp to [0, 1], the sRGB curve, 8 bits; so figures look as users see them."""
+    v = np.clip(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    encoded = np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(v, 1 / 2.4) - 0.055)
+    return (encoded * 255 + 0.5).astype(np.uint8)
 
 
 # ---------------------------------------------------------------- the run's data
@@ -466,8 +469,9 @@ def figures(run, means, folder, results_path):
     relative = os.path.relpath(folder, os.path.dirname(os.path.abspath(results_path)))
     lines = ["## Figures", "",
              "For each spp, the test frame where the noisy input has the highest FLIP, cropped to the "
-             "window with the most noisy-input error; colour with the figure tonemap "
-             "`0.47 v^(1/2.4)` on radiance clamped to [0, 6], enlarged without interpolation. "
+             "window with the most noisy-input error; colour through dndenoise's default display "
+             "transform (the built-in sRGB config: clamp to [0, 1], the sRGB curve; what `-o out.png` "
+             "writes), enlarged without interpolation. "
              "Second row: FLIP error maps from `dnmetrics --heatmap` (magma, black = no error).", ""]
     for spp in run.plan["spps"]:
         table = means.get(spp)

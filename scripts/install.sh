@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs every dependency from Debian 12 packages and PyPI, then configures
 # and builds the project into ./build (Release). Safe to run again.
-#   DN_SKIP_BLENDER=1  skip Blender (only the scene generator needs it)
+#   DN_SKIP_BLENDER=1  skip Blender (only the scene generator needs it; the
+#                      preview tests then skip Blender's Filmic)
+#   DN_PREFIX=/opt/dn  also install the tools, libraries, models and docs there
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -31,3 +33,7 @@ fi
 
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)"
+if [ -n "${DN_PREFIX:-}" ]; then
+  cmake --install build --prefix "$DN_PREFIX" >/dev/null
+  echo "install.sh: installed into $DN_PREFIX (tools in $DN_PREFIX/bin)" >&2
+fi

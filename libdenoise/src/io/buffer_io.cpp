@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <set>
 
 #include <unistd.h>
@@ -681,15 +682,19 @@ bool fitsHalf(const Image& image) {
 namespace {
 
 // Writes one plain image; windows that are set place it in a larger frame.
-void writePlain(const std::string& path, const Image& image, bool half,
+void writePlain(const std::string& path, const Image& image, PixelType type,
                 const std::vector<std::string>& channelNames, const PixelWindow& data,
                 const PixelWindow& display) {
+  static const std::map<PixelType, OIIO::TypeDesc> kTypes = {
+      {PixelType::Half, OIIO::TypeDesc::HALF},
+      {PixelType::Float, OIIO::TypeDesc::FLOAT},
+      {PixelType::UInt8, OIIO::TypeDesc::UINT8},
+      {PixelType::UInt16, OIIO::TypeDesc::UINT16}};
   if (image.empty()) fail(path, "refusing to write an empty image");
   writeAtomically(path, [&](const std::string& tmp) {
     if (hasExtension(path, ".pfm")) return writePfm(tmp, path, image);
     auto out = createOutput(tmp, path);
-    OIIO::ImageSpec spec(image.width, image.height, image.channels,
-                         half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
+    OIIO::ImageSpec spec(image.width, image.height, image.channels, kTypes.at(type));
     if (!channelNames.empty()) spec.channelnames = channelNames;
     if (!data.empty() && data.width == image.width && data.height == image.height &&
         out->supports("displaywindow")) {
@@ -875,7 +880,12 @@ void writePart(OIIO::ImageInput& in, OIIO::ImageOutput& out, const OutputPart& p
 
 void writeImage(const std::string& path, const Image& image, bool half,
                 const std::vector<std::string>& channelNames) {
-  writePlain(path, image, half, channelNames, {}, {});
+  writePlain(path, image, half ? PixelType::Half : PixelType::Float, channelNames, {}, {});
+}
+
+void writeImage(const std::string& path, const Image& image, PixelType type,
+                const std::vector<std::string>& channelNames) {
+  writePlain(path, image, type, channelNames, {}, {});
 }
 
 WriteOptions writeOptionsFor(const FrameBuffers& frame) {
@@ -893,7 +903,8 @@ void writeResult(const std::string& sourcePath, const std::string& outPath, cons
   if (!allowOverwriteSource && fs::exists(outPath, ec) && fs::equivalent(sourcePath, outPath, ec))
     fail(outPath, "is the input file; refusing to overwrite it (use --inplace)");
   if (options.rgbOnly) {
-    writePlain(outPath, result, options.half, {"R", "G", "B"}, options.dataWindow,
+    writePlain(outPath, result, options.half ? PixelType::Half : PixelType::Float,
+               {"R", "G", "B"}, options.dataWindow,
                options.displayWindow);
     return;
   }

@@ -99,4 +99,10 @@ void writeResult(const std::string& sourcePath, const std::string& outPath, cons
 void writeImage(const std::string& path, const Image& image, bool half = false,
                 const std::vector<std::string>& channelNames = {});
 
+// The same with the stored pixel type chosen: 8 and 16-bit integer types take
+// values in [0, 1] (clamped and rounded by OpenImageIO).
+enum class PixelType { Half, Float, UInt8, UInt16 };
+void writeImage(const std::string& path, const Image& image, PixelType type,
+                const std::vector<std::string>& channelNames = {});
+
 }  // namespace dn
