@@ -1,4 +1,5 @@
 #include "dn/io/buffer_io.h"
+#include "dn/io/output_files.h"
 
 #include <OpenImageIO/imageio.h>
 
@@ -175,15 +176,31 @@ void writeAtomically(const std::string& path, WriteFn&& write) {
   fs::path parent = fs::path(path).parent_path();
   if (!parent.empty() && !fs::is_directory(parent, ec)) fail(path, "output folder does not exist");
   const std::string tmp = temporaryPathFor(path);
+  trackTemporaryFile(tmp);  // a SIGTERM handler removes it (dn/io/output_files.h)
   try {
     write(tmp);
     fs::rename(tmp, path);
   } catch (const fs::filesystem_error& e) {
     fs::remove(tmp, ec);
+    untrackTemporaryFile(tmp);
     fail(path, std::string("cannot write (") + e.code().message() + ")");
   } catch (...) {
     fs::remove(tmp, ec);
+    untrackTemporaryFile(tmp);
     throw;
+  }
+  untrackTemporaryFile(tmp);
+}
+
+// The process's provenance (dn/io/output_files.h); ImageHistory grows by a line.
+void addProvenance(OIIO::ImageSpec& spec) {
+  for (const auto& [name, value] : provenance()) {
+    std::string text = value;
+    if (name == "ImageHistory") {
+      const std::string before = spec.get_string_attribute("ImageHistory");
+      if (!before.empty()) text = before + "\n" + value;
+    }
+    spec.attribute(name, text);
   }
 }
 
@@ -393,6 +410,7 @@ void writeImage(const std::string& path, const Image& image, bool half,
     OIIO::ImageSpec spec(image.width, image.height, image.channels,
                          half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
     if (!channelNames.empty()) spec.channelnames = channelNames;
+    addProvenance(spec);
     if (!out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data()) ||
         !out->close())
       fail(path, "write failed (" + firstLine(out->geterror()) + ")");
@@ -434,6 +452,7 @@ void writeResult(const std::string& sourcePath, const std::string& outPath, cons
   }
   main.alpha_channel = -1;
   main.z_channel = -1;
+  addProvenance(main);
 
   writeAtomically(outPath, [&](const std::string& tmp) {
     auto out = createOutput(tmp, outPath);
