@@ -18,6 +18,7 @@
 #include "common/app.h"
 #include "common/cli.h"
 #include "common/finite.h"
+#include "common/version.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/data/dataset.h"
@@ -128,6 +129,7 @@ struct TrainOptions {
   std::string seed = "1", task = "cleanse", spp = "4,16,64";
   std::string train_split = "train", val_split = "val";
   bool resume = false;
+  std::string command;  // recorded in the model file
   KernelNetConfig net;
   std::set<std::string> given;  // options set on the command line
 };
@@ -330,8 +332,9 @@ class JsonLog {
   std::ofstream out_;
 };
 
-int runTrain(cli::Args& args) {
+int runTrain(cli::Args& args, int argc, char** argv) {
   TrainOptions o = parseTrain(args);
+  o.command = cli::commandLine(argc, argv);
   torch::set_num_threads(o.threads);
   KernelModelInfo info;
   info.net = o.net;
@@ -347,7 +350,10 @@ int runTrain(cli::Args& args) {
     position = std::stoull(state.at("loader_position"));
     seconds_before = std::stod(state.at("seconds"));
   }
-  trainer.info().notes = {{"data", o.data},
+  trainer.info().notes = {{"software", fmt::format("dncleanse {} ({})", DN_PROJECT_VERSION,
+                                                    DN_GIT_DESCRIBE)},
+                          {"command", o.command},
+                          {"data", o.data},
                           {"task", o.task},
                           {"batch", std::to_string(o.batch)},
                           {"crop", std::to_string(o.crop)},
@@ -584,7 +590,7 @@ int main(int argc, char** argv) {
       std::fputs(cli::versionText("dncleanse", components).c_str(), stdout);
       return cli::kExitOk;
     }
-    if (args.flag("train")) return runTrain(args);
+    if (args.flag("train")) return runTrain(args, argc, argv);
     if (args.flag("apply")) return runApply(args, argc, argv);
     return runFile(args, argc, argv);
   } catch (const cli::UsageError& error) {

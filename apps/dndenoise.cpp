@@ -232,6 +232,8 @@ Options parseArgs(int argc, char** argv) {
     throw cli::UsageError(o.inputs.empty()
                               ? "no input given (see --help)"
                               : "give either IN files or --color/--albedo/... files, not both");
+  if (!o.separateFiles.empty() && !o.separateFiles.count("color"))
+    throw cli::UsageError("separate buffer files need --color FILE");
   if (o.maxError >= 0 && o.reference.empty()) throw cli::UsageError("--maxerror needs --ref REF");
   if (!o.reference.empty() && o.maxError < 0) throw cli::UsageError("--ref needs --maxerror");
   checkOptionPairs(o);

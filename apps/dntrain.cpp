@@ -21,6 +21,7 @@
 
 #include "common/app.h"
 #include "common/cli.h"
+#include "common/version.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/nn/control_module.h"
@@ -127,6 +128,7 @@ struct Options {
   int threads = 0;
   bool resume = false;
   int worldSize = 1, rank = 0, masterPort = 29500;
+  std::string commandLine;  // recorded in the model files written
   std::string masterAddr = "127.0.0.1";
 };
 
@@ -155,6 +157,7 @@ std::vector<std::string> withModel(std::vector<std::string> files, const std::st
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
+  o.commandLine = cli::commandLine(argc, argv);
   distributedDefaultsFromEnvironment(o);
   while (!args.done()) {
     if (args.flag("-h", "--help")) {
@@ -297,6 +300,13 @@ std::vector<std::string> auxBuffers(const std::string& spec) {
   auto list = cli::splitList(spec);
   auxChannelCount(list);  // validates the names
   return list;
+}
+
+// Which tool and command wrote a model file, as image outputs carry it. Not for
+// trained models: a checkpoint resumes only with the notes it was written with.
+void stampProvenance(ModelInfo& info, const Options& o) {
+  info.notes["software"] = fmt::format("dntrain {} ({})", DN_PROJECT_VERSION, DN_GIT_DESCRIBE);
+  info.notes["command"] = o.commandLine;
 }
 
 // The model to train, described by its ModelInfo (training options go in notes,
@@ -446,6 +456,7 @@ int setDefaults(const Options& o) {
     }
     info.notes["noise_reference"] = fmt::format("{:.4f}", sum / o.noiseReference.size());
   }
+  stampProvenance(info, o);
   auto& skip = info.notes["default_skip"];
   if (skip.empty()) skip = "0";
   try {
@@ -474,6 +485,7 @@ int extractPrior(const Options& o) {
   info.has_control = false;
   info.input_buffers.clear();
   info.notes["extracted_from"] = fs::path(o.model).filename().string();
+  stampProvenance(info, o);
   saveModelFile(o.out, info, PriorDenoiser(loaded.prior()));
   fmt::print(stderr, "dntrain: {}: the prior of {}\n", o.out, o.model);
   return cli::kExitOk;

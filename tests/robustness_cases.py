@@ -119,6 +119,9 @@ CASES = [
     Case("--maxerror fails: exit 2", D + " --ref {ref} --maxerror l1=1e-9 {frame} -o {w}/gate2.exr", 2, "FAILED"),
     Case("a 3.4e38 pixel: finite output", D + " --float {huge} -o {w}/huge_out.exr", 0, "", ("huge",),
          check="finite_dndenoise"),
+    Case("separate buffers without --color", D + " --albedo {frame} -o {w}/x.exr", 1, "need --color FILE"),
+    Case("separate buffer output over one of them", D + " --color {rgb} --albedo {rgb2} -o {rgb2}", 1,
+         "is an input", ("rgb2",)),
     Case("unknown option", D + " --bogus {frame} -o {w}/x.exr", 1, "unknown option '--bogus'"),
     Case("no output", D + " {frame}", 1, "no output given"),
     # ---------------------------------------------------------------- dnmetrics

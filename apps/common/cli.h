@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <optional>
 #include <stdexcept>
@@ -97,11 +98,11 @@ class Args {
   }
 
  private:
-  static std::string numberText(double v) {
-    std::string t = std::to_string(v);  // "16.000000" -> "16", "0.500000" -> "0.5"
-    if (t.find('.') != std::string::npos) t.erase(t.find_last_not_of('0') + 1);
-    if (!t.empty() && t.back() == '.') t.pop_back();
-    return t;
+  static std::string numberText(int v) { return std::to_string(v); }
+  static std::string numberText(double v) {  // 1e-12, 0.5, 1e+06
+    char text[32];
+    std::snprintf(text, sizeof text, "%g", v);
+    return text;
   }
   std::vector<std::string> args_;
   std::size_t pos_ = 0;

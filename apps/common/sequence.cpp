@@ -52,7 +52,7 @@ bool isFramePattern(const std::string& path) {
   std::error_code ec;
   if (fs::exists(path, ec)) return false;
   std::string printf, range;
-  return Filesystem::parse_pattern(path.c_str(), 0, printf, range) && printf != path;
+  return Filesystem::parse_pattern(path.c_str(), 0, printf, range);
 }
 
 std::string frameFile(const std::string& pattern, int frame) {
