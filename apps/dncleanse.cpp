@@ -19,13 +19,13 @@
 #include "common/cli.h"
 #include "common/finite.h"
 #include "common/version.h"
+#include "dn/data/dataset.h"
+#include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
-#include "dn/data/dataset.h"
 #include "dn/nn/kernel_net.h"
-#include "dn/train/kernel_trainer.h"
 #include "dn/nn/model_file.h"
-#include "dn/infer/model_inputs.h"
+#include "dn/train/kernel_trainer.h"
 
 namespace fs = std::filesystem;
 using namespace dn;
@@ -230,8 +230,7 @@ TrainOptions parseTrain(cli::Args& args) {
   cli::checkFiles({}, {{o.out, "--out"}, {o.log, "--log"}, {o.checkpoint, "--checkpoint"}});
   if (!o.resume && fs::exists(o.checkpoint))
     throw cli::UsageError(o.checkpoint + " exists: continue that run with --resume, or delete it");
-  if (!(o.checkpoint_minutes > 0))
-    throw cli::UsageError("--checkpoint-minutes must be above 0");
+  if (!(o.checkpoint_minutes > 0)) throw cli::UsageError("--checkpoint-minutes must be above 0");
   try {
     kernelTaskFromName(o.task);
     o.net.validate();
@@ -350,14 +349,14 @@ int runTrain(cli::Args& args, int argc, char** argv) {
     position = std::stoull(state.at("loader_position"));
     seconds_before = std::stod(state.at("seconds"));
   }
-  trainer.info().notes = {{"software", fmt::format("dncleanse {} ({})", DN_PROJECT_VERSION,
-                                                    DN_GIT_DESCRIBE)},
-                          {"command", o.command},
-                          {"data", o.data},
-                          {"task", o.task},
-                          {"batch", std::to_string(o.batch)},
-                          {"crop", std::to_string(o.crop)},
-                          {"spp", o.spp}};
+  trainer.info().notes = {
+      {"software", fmt::format("dncleanse {} ({})", DN_PROJECT_VERSION, DN_GIT_DESCRIBE)},
+      {"command", o.command},
+      {"data", o.data},
+      {"task", o.task},
+      {"batch", std::to_string(o.batch)},
+      {"crop", std::to_string(o.crop)},
+      {"spp", o.spp}};
 
   data::LoaderOptions loader_options;
   loader_options.batchSize = o.batch;
@@ -526,7 +525,6 @@ int runApply(cli::Args& args, int argc, char** argv) {
 }
 
 // ---------------------------------------------------------------- one file
-
 
 int runFile(cli::Args& args, int argc, char** argv) {
   std::string input, output, model_path, layer;

@@ -19,9 +19,9 @@
 #include "common/cli.h"
 #include "common/finite.h"
 #include "common/sequence.h"
+#include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
-#include "dn/infer/denoiser.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 
@@ -174,8 +174,7 @@ Options parseArgs(int argc, char** argv) {
     } else if (args.flag("--layer")) {
       o.layer = args.value("--layer");
       if (o.layer.empty() || o.layer.find_first_of(". \t\n") != std::string::npos)
-        throw cli::UsageError("--layer needs a name without dots or spaces, got '" + o.layer +
-                              "'");
+        throw cli::UsageError("--layer needs a name without dots or spaces, got '" + o.layer + "'");
     } else if (args.flag("--frames")) {
       o.frames = args.value("--frames");
       cli::parseFrameRange(o.frames);
@@ -262,7 +261,8 @@ std::vector<std::pair<std::string, std::string>> planJobs(const Options& o) {
         throw cli::UsageError("several inputs need -o to be an existing folder");
       jobs.emplace_back(input, (fs::path(o.output) / fs::path(input).filename()).string());
     } else {
-      if (outPattern) throw cli::UsageError(o.output + ": an output pattern needs an input pattern");
+      if (outPattern)
+        throw cli::UsageError(o.output + ": an output pattern needs an input pattern");
       jobs.emplace_back(input, o.output);
     }
   }
@@ -425,8 +425,8 @@ int run(Options o, int argc, char** argv) {
 
     WriteOptions write;
     // Nothing non-finite leaves the tool: overflow becomes the largest float.
-    const std::size_t clamped = cli::clampToFinite(result.color) +
-                                cli::clampToFinite(result.uncertainty);
+    const std::size_t clamped =
+        cli::clampToFinite(result.color) + cli::clampToFinite(result.uncertainty);
     if (clamped > 0)
       fmt::print(stderr, "dndenoise: {}: {} values beyond the float range clamped\n", name,
                  clamped);

@@ -15,9 +15,9 @@
 
 #include "common/app.h"
 #include "common/cli.h"
+#include "dn/flip.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
-#include "dn/flip.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 
@@ -312,7 +312,8 @@ int run(const Options& o, int argc, char** argv) {
   if (!o.heatmap.empty() && pairs.size() != 1)
     throw cli::UsageError("--heatmap needs exactly one TEST");
   std::vector<std::string> inputs;
-  for (const auto& [refPath, testPath, name] : pairs) inputs.push_back(refPath), inputs.push_back(testPath);
+  for (const auto& [refPath, testPath, name] : pairs)
+    inputs.push_back(refPath), inputs.push_back(testPath);
   std::vector<cli::Output> outputs;
   if (!o.heatmap.empty()) outputs.push_back({o.heatmap, pairs[0][1]});
   cli::checkFiles(inputs, outputs);

@@ -22,15 +22,15 @@
 #include "common/app.h"
 #include "common/cli.h"
 #include "common/version.h"
+#include "dn/data/training_data.h"
+#include "dn/diffusion/sampler.h"
+#include "dn/infer/denoiser.h"
+#include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/nn/control_module.h"
-#include "dn/infer/denoiser.h"
 #include "dn/train/distributed.h"
-#include "dn/infer/model_inputs.h"
-#include "dn/diffusion/sampler.h"
 #include "dn/train/trainer.h"
-#include "dn/data/training_data.h"
 
 namespace fs = std::filesystem;
 using namespace dn;
@@ -256,8 +256,7 @@ Options parseArgs(int argc, char** argv) {
       throw cli::UsageError("--exposure-target must be in (0, 6)");
     if (o.out.empty()) o.out = o.model;
     // Only the sampling defaults change: rewriting --model in place is the default.
-    cli::checkFiles(withModel(o.noiseReference, o.model), {{o.out, o.model}},
-                    cli::Inplace::Allow);
+    cli::checkFiles(withModel(o.noiseReference, o.model), {{o.out, o.model}}, cli::Inplace::Allow);
     return o;
   }
   if (o.mode == "prior") {
@@ -282,7 +281,8 @@ Options parseArgs(int argc, char** argv) {
   if (o.prediction != "eps" && o.prediction != "v")
     throw cli::UsageError("--prediction must be eps or v");
   if (o.rank >= o.worldSize)
-    throw cli::UsageError(fmt::format("--rank {} must be below --world-size {}", o.rank, o.worldSize));
+    throw cli::UsageError(
+        fmt::format("--rank {} must be below --world-size {}", o.rank, o.worldSize));
   if (o.log.empty()) o.log = o.out + ".log.jsonl";
   if (o.checkpoint.empty()) o.checkpoint = o.out + ".ckpt";
   // Never overwrite the model training starts from; a resumed run rewrites its

@@ -17,8 +17,8 @@ namespace fs = std::filesystem;
 namespace dn::cli {
 
 std::string versionText(const std::string& tool, const Components& libraries) {
-  std::string text = fmt::format("{} {} ({} {})\n", tool, DN_PROJECT_VERSION, DN_PROJECT_NAME,
-                                 DN_GIT_DESCRIBE);
+  std::string text =
+      fmt::format("{} {} ({} {})\n", tool, DN_PROJECT_VERSION, DN_PROJECT_NAME, DN_GIT_DESCRIBE);
   for (const auto& [name, version] : libraries) text += fmt::format("  {} {}\n", name, version);
   return text;
 }
@@ -34,9 +34,9 @@ std::string commandLine(int argc, char** argv) {
   std::string out;
   for (int i = 0; i < argc; ++i) {
     std::string a = argv[i];
-    const bool plain = !a.empty() && a.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLM"
-                                                          "NOPQRSTUVWXYZ0123456789_-+=.,/:@%") ==
-                                         std::string::npos;
+    const bool plain = !a.empty() && a.find_first_not_of(
+                                         "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLM"
+                                         "NOPQRSTUVWXYZ0123456789_-+=.,/:@%") == std::string::npos;
     if (!plain) {
       std::string quoted = "'";
       for (char c : a) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -50,9 +50,8 @@ std::string commandLine(int argc, char** argv) {
 void setToolProvenance(const std::string& tool, int argc, char** argv, const std::string& model) {
   const std::string software = fmt::format("{} {} ({})", tool, DN_PROJECT_VERSION, DN_GIT_DESCRIBE);
   const std::string command = commandLine(argc, argv);
-  Attributes attributes = {{"Software", software},
-                           {"ImageHistory", software + ": " + command},
-                           {"dn:command", command}};
+  Attributes attributes = {
+      {"Software", software}, {"ImageHistory", software + ": " + command}, {"dn:command", command}};
   if (!model.empty()) {
     attributes.emplace_back("dn:model", fs::path(model).filename().string());
     attributes.emplace_back("dn:model_sha256", sha256OfFile(model));
@@ -99,11 +98,17 @@ void checkReadable(const std::string& path) {
 
 namespace {
 
-// The same file: the same inode when both exist, else the same canonical path.
+// The absolute path with symlinks, "." and ".." resolved as far as it exists.
+fs::path resolved(const std::string& path) {
+  std::error_code ec;
+  return fs::weakly_canonical(fs::absolute(path, ec), ec);
+}
+
+// The same file: the same inode when both exist, else the same resolved path.
 bool sameFile(const std::string& a, const std::string& b) {
   std::error_code ec;
   if (fs::exists(a, ec) && fs::exists(b, ec)) return fs::equivalent(a, b, ec);
-  return fs::weakly_canonical(a, ec) == fs::weakly_canonical(b, ec);
+  return resolved(a) == resolved(b);
 }
 
 void checkWritableFolder(const std::string& output) {
@@ -132,9 +137,7 @@ void checkFiles(const std::vector<std::string>& inputs, const std::vector<Output
                     "; refusing to overwrite it" +
                     (inplace == Inplace::Offer && own ? " (use --inplace)" : ""));
     }
-    std::error_code ec;
-    const fs::path key = fs::weakly_canonical(out.path, ec);
-    auto [it, fresh] = seen.emplace(key, &out);
+    auto [it, fresh] = seen.emplace(resolved(out.path), &out);
     if (!fresh)
       throw IoError(out.path + ": would be written twice, from " + it->second->from + " and from " +
                     out.from);

@@ -63,8 +63,8 @@ std::string frameFile(const std::string& pattern, int frame) {
 }
 
 std::vector<std::pair<int, std::string>> sequenceFrames(const std::string& pattern,
-                                                        const std::string& frames,
-                                                        bool skipMissing, const std::string& tool) {
+                                                        const std::string& frames, bool skipMissing,
+                                                        const std::string& tool) {
   const Pattern p = parse(pattern);
   std::vector<int> wanted;
   if (!frames.empty() || !p.range.empty()) {
@@ -77,8 +77,8 @@ std::vector<std::pair<int, std::string>> sequenceFrames(const std::string& patte
     if (found.empty()) throw IoError(pattern + ": no frames match this pattern");
     const auto [lo, hi] = std::minmax_element(found.begin(), found.end());
     if (std::size_t(*hi - *lo) >= kMaxFrames)
-      throw IoError(fmt::format("{}: frames {} to {} are too far apart; give --frames", pattern,
-                                *lo, *hi));
+      throw IoError(
+          fmt::format("{}: frames {} to {} are too far apart; give --frames", pattern, *lo, *hi));
     for (int f = *lo; f <= *hi; ++f) wanted.push_back(f);
   }
   std::vector<std::pair<int, std::string>> present;

@@ -19,8 +19,8 @@ bool isFramePattern(const std::string& path);
 // on disk. Each frame of the range that is missing gets one line on stderr
 // ("<tool>: <file>: missing frame N"); then the run stops unless skipMissing.
 std::vector<std::pair<int, std::string>> sequenceFrames(const std::string& pattern,
-                                                        const std::string& frames,
-                                                        bool skipMissing, const std::string& tool);
+                                                        const std::string& frames, bool skipMissing,
+                                                        const std::string& tool);
 
 // The file of frame `frame` of an output pattern.
 std::string frameFile(const std::string& pattern, int frame);
