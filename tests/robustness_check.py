@@ -164,7 +164,7 @@ CHECKS = {
     "printf_outputs": lambda f, o: _outputs(f, ["p.0001.exr", "p.0002.exr", "p.0004.exr"]),
     "at_output": lambda f, o: _outputs(f, ["at.0001.exr"]),
     "finite_dndenoise": lambda f, o: _finite(os.path.join(f["w"], "huge_out.exr"), "ViewLayer.Denoised", False),
-    "finite_dncleanse": lambda f, o: _finite(os.path.join(f["w"], "huge_c.exr"), "ViewLayer.Cleansed", True),
+    "finite_dncleanse": lambda f, o: _finite(os.path.join(f["w"], "huge_c.exr"), "ViewLayer.Cleansed", False),
     "json_inf": lambda f, o: (json.loads(o.stdout)["results"][0]["psnr"] == "inf", o.stdout),
     "csv_inf": lambda f, o: (_csv_rows(o)[1][1] == "inf", o.stdout),
     "csv_quoted": lambda f, o: (_csv_rows(o)[1][0] == f["oddname"], o.stdout),
