@@ -8,6 +8,7 @@ ended the tool, that its protected files kept their bytes and that no
 temporary file was left behind; at the end no generated input may have changed.
 """
 import argparse
+import concurrent.futures
 import csv
 import hashlib
 import io
@@ -173,11 +174,29 @@ CHECKS = {
 }
 
 
-def temporaries(w):
+def temporaries(w, pid=None):
+    """Temporary files (".NAME.tmpPID-N.ext") in w, of one process or of all."""
+    mark = f".tmp{pid}-" if pid else ".tmp"
     found = []
     for root, _, names in os.walk(w):
-        found += [os.path.join(root, n) for n in names if ".tmp" in n]
+        found += [os.path.join(root, n) for n in names if mark in n]
     return found
+
+
+def run_case(case, files, subst, quoted):
+    """Runs one row; returns what the checks need. Called from worker threads."""
+    cmd = shlex.split(case.cmd.format(**quoted))
+    env = dict(os.environ)
+    env.pop("DN_MODEL", None)
+    for k, v in (case.env or {}).items():
+        env[k] = v.format(**subst)
+    keep = {k: sha(files[k]) for k in case.keep}
+    t0 = time.time()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    stdout, stderr = proc.communicate(timeout=120)
+    out = subprocess.CompletedProcess(cmd, proc.returncode, stdout, stderr)
+    changed = [k for k, h in keep.items() if sha(files[k]) != h]
+    return cmd, out, time.time() - t0, changed, temporaries(files["w"], proc.pid)
 
 
 def main():
@@ -198,32 +217,27 @@ def main():
     subst = {**files, **bins}
     quoted = {k: shlex.quote(v) for k, v in subst.items()}
     cases = [c for c in CASES if not args.k or args.k in c.name]
-    for case in cases:
-        cmd = shlex.split(case.cmd.format(**quoted))
-        env = dict(os.environ)
-        env.pop("DN_MODEL", None)
-        for k, v in (case.env or {}).items():
-            env[k] = v.format(**subst)
-        keep = {k: sha(files[k]) for k in case.keep}
-        t0 = time.time()
-        out = run(cmd, timeout=120, env=env)
-        label = f"{case.name} ({time.time() - t0:.1f} s)"
-        text = out.stdout if "--version" in cmd else out.stderr
-        ok = out.returncode == case.code and case.message in text and 0 <= out.returncode < 128
-        check(f"{label}: exit {case.code}, says '{case.message}'", ok,
-              f"exit {out.returncode}, stderr {out.stderr!r}, command {shlex.join(cmd)}")
-        if case.keep:
-            check(f"{label}: {', '.join(case.keep)} unchanged", all(sha(files[k]) == h for k, h in keep.items()))
-        for path in case.absent:
-            path = path.format(**subst)
-            check(f"{label}: no {os.path.basename(path)}", not os.path.exists(path), path)
-        tmp = temporaries(w)
-        check(f"{label}: no temporary file", not tmp, tmp)
-        if case.check:
-            good, detail = CHECKS[case.check](files, out)
-            check(f"{label}: {case.check}", good, detail)
-        for t in tmp:
-            os.remove(t)
+    # Two at a time: most rows are a tool refusing an option, and starting
+    # LibTorch dominates them. Outputs of different rows never share a name.
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        results = pool.map(lambda c: run_case(c, files, subst, quoted), cases)
+        for case, (cmd, out, seconds, changed, tmp) in zip(cases, results):
+            label = f"{case.name} ({seconds:.1f} s)"
+            text = out.stdout if "--version" in cmd else out.stderr
+            ok = out.returncode == case.code and case.message in text and 0 <= out.returncode < 128
+            check(f"{label}: exit {case.code}, says '{case.message}'", ok,
+                  f"exit {out.returncode}, stderr {out.stderr!r}, command {shlex.join(cmd)}")
+            if case.keep:
+                check(f"{label}: {', '.join(case.keep)} unchanged", not changed, changed)
+            for path in case.absent:
+                path = path.format(**subst)
+                check(f"{label}: no {os.path.basename(path)}", not os.path.exists(path), path)
+            check(f"{label}: no temporary file", not tmp, tmp)
+            if case.check:
+                good, detail = CHECKS[case.check](files, out)
+                check(f"{label}: {case.check}", good, detail)
+    leftover = temporaries(w)
+    check("no temporary file in the work folder", not leftover, leftover)
     changed = [k for k, h in before.items() if sha(inputs[k]) != h]
     check("no generated input changed checksum in any case", not changed, changed)
     print(f"{len(cases)} cases in {time.time() - start:.1f} s")
