@@ -27,7 +27,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", required=True)
     ap.add_argument("--work-dir", required=True)
-    ap.add_argument("--runs", type=int, default=24)
+    ap.add_argument("--runs", type=int, default=16)
     args = ap.parse_args()
     w = os.path.abspath(args.work_dir)
     shutil.rmtree(w, ignore_errors=True)
@@ -35,7 +35,7 @@ def main():
     p = lambda *n: os.path.join(w, *n)  # noqa: E731
     here = os.path.dirname(os.path.abspath(__file__))
     data = p("data")
-    subprocess.run([sys.executable, os.path.join(here, "make_tiny_dataset.py"), data, "--size", "96",
+    subprocess.run([sys.executable, os.path.join(here, "make_tiny_dataset.py"), data, "--size", "256",
                     "--frames", "1", "--stacks", "1"], check=True)
     dntrain, dndenoise = os.path.join(args.bin, "dntrain"), os.path.join(args.bin, "dndenoise")
     tiny = ["--batch", "1", "--crop", "16", "--threads", "1", "--spp", "4", "--val-every", "0", "--steps", "1"]
