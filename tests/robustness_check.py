@@ -193,7 +193,12 @@ def run_case(case, files, subst, quoted):
     keep = {k: sha(files[k]) for k in case.keep}
     t0 = time.time()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    stdout, stderr = proc.communicate(timeout=120)
+    try:
+        stdout, stderr = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:  # a hang is a failure of its row, not of the test
+        proc.kill()
+        stdout, stderr = proc.communicate()
+        stderr += "\n(killed after 120 s)"
     out = subprocess.CompletedProcess(cmd, proc.returncode, stdout, stderr)
     changed = [k for k, h in keep.items() if sha(files[k]) != h]
     return cmd, out, time.time() - t0, changed, temporaries(files["w"], proc.pid)
