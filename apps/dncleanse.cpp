@@ -3,6 +3,7 @@
 //   dncleanse apply --model cleanser.pt --data DIR [--force]
 //   dncleanse IN.exr -o OUT.exr --model M
 #include <fmt/format.h>
+#include <torch/version.h>
 
 #include <atomic>
 #include <chrono>
@@ -14,14 +15,19 @@
 
 #include <unistd.h>
 
+#include "common/app.h"
 #include "common/cli.h"
 #include "common/progress.h"
 #include "dn/io/buffer_io.h"
+#include "common/finite.h"
+#include "common/version.h"
 #include "dn/data/dataset.h"
-#include "dn/nn/kernel_net.h"
-#include "dn/train/kernel_trainer.h"
-#include "dn/nn/model_file.h"
 #include "dn/infer/model_inputs.h"
+#include "dn/io/buffer_io.h"
+#include "dn/io/output_files.h"
+#include "dn/nn/kernel_net.h"
+#include "dn/nn/model_file.h"
+#include "dn/train/kernel_trainer.h"
 
 namespace fs = std::filesystem;
 using namespace dn;
@@ -32,6 +38,7 @@ namespace {
 const char* kUsage = R"(usage: dncleanse train --data DIR --out MODEL [options]
        dncleanse apply --model MODEL --data DIR [--force] [--source a|b]
        dncleanse IN.exr -o OUT.exr --model MODEL [--layer NAME] [--rgb-only]
+       dncleanse --version
 
 A kernel-predicting network (Isik et al. 2021, no temporal terms) trained with
 SMAPE. --task cleanse (default) learns ground truth -> the other ground truth
@@ -41,28 +48,28 @@ SMAPE. --task cleanse (default) learns ground truth -> the other ground truth
 train options:
   --data DIR             data set (docs/dataset.md); frames of --train-split
   --out MODEL            model file (EMA weights), written atomically
-  --steps N              total steps (default 20000)
-  --batch B              samples per step (default 8)
-  --crop C               square crop size (default 64)
-  --lr X                 Adam learning rate (default 1e-3)
+  --steps N              total steps, >= 1 (default 20000)
+  --batch B              samples per step, 1-1024 (default 8)
+  --crop C               square crop size, 8-4096 (default 64)
+  --lr X                 Adam learning rate, in (0, 1] (default 1e-3)
   --halve-every N        halve the learning rate every N steps (default 0: never)
-  --seed S               data order and initial weights (default 1)
+  --seed S               data order and initial weights, >= 0 (default 1)
   --task cleanse|denoise (default cleanse)
   --spp LIST             denoise input sample counts (default 4,16,64)
   --buffers LIST         aux buffers (default: the standard Cycles set, see docs)
-  --widths LIST          UNet widths per level (default 24,32,48)
-  --dilations LIST       one kernel iteration per dilation (default 1,2,4)
-  --feature-dims N       affinity features per iteration (default 8)
+  --widths LIST          UNet widths per level, each 1-1024 (default 24,32,48)
+  --dilations LIST       one kernel iteration per dilation, each 1-64 (default 1,2,4)
+  --feature-dims N       affinity features per iteration, 1-256 (default 8)
   --demodulate on|off    filter radiance / albedo, then multiply back (default on)
   --val-every N          validation SMAPE every N steps (default 0: never)
-  --val-samples N        validation crops (default 32)
+  --val-samples N        validation crops, 1-100000 (default 32)
   --train-split NAME     (default train)    --val-split NAME  (default val)
   --log FILE             JSON lines log (default MODEL.log.jsonl)
   --checkpoint FILE      (default MODEL.ckpt), written every --checkpoint-minutes
   --checkpoint-minutes M (default 5) and on SIGINT/SIGTERM
   --resume               continue the run in --checkpoint (same data order,
                          optimizer state and step); --steps may be raised
-  --threads N            compute threads (default 2)
+  --threads N            compute threads, 1-1024 (default 2)
 apply options:
   --force                recompute frames that already have gt_clean.exr
   --source a|b           which ground truth to cleanse (default a)
@@ -78,11 +85,9 @@ exit codes: 0 ok, 1 bad input or arguments, 130/143 training stopped by SIGINT/S
 volatile std::sig_atomic_t g_stop_signal = 0;
 extern "C" void onStopSignal(int signal) { g_stop_signal = signal; }
 
-std::vector<int64_t> toInt64s(const std::string& option, const std::string& text) {
-  std::vector<int64_t> out;
-  for (const auto& item : cli::splitList(text)) out.push_back(cli::Args::toInt(option, item));
-  if (out.empty()) throw cli::UsageError(option + " needs a list");
-  return out;
+std::vector<int64_t> toInt64s(const std::string& option, const std::string& text, int lo, int hi) {
+  const auto list = cli::intList(option, text, lo, hi);
+  return {list.begin(), list.end()};
 }
 
 bool onOff(const std::string& option, const std::string& value) {
@@ -120,6 +125,7 @@ struct TrainOptions {
   std::string seed = "1", task = "cleanse", spp = "4,16,64";
   std::string train_split = "train", val_split = "val";
   bool resume = false;
+  std::string command;  // recorded in the model file
   KernelNetConfig net;
   std::set<std::string> given;  // options set on the command line
 };
@@ -168,43 +174,44 @@ TrainOptions parseTrain(cli::Args& args) {
     else if (take("--checkpoint"))
       o.checkpoint = args.value("--checkpoint");
     else if (take("--steps"))
-      o.steps = args.intValue("--steps");
+      o.steps = args.intValue("--steps", 1, INT32_MAX);
     else if (take("--batch"))
-      o.batch = args.intValue("--batch");
+      o.batch = args.intValue("--batch", 1, 1024);
     else if (take("--crop"))
-      o.crop = args.intValue("--crop");
+      o.crop = args.intValue("--crop", 8, 4096);
     else if (take("--lr"))
-      o.lr = args.doubleValue("--lr");
+      o.lr = args.doubleValue("--lr", 1e-12, 1.0);
     else if (take("--halve-every"))
-      o.halve_every = args.intValue("--halve-every");
+      o.halve_every = args.intValue("--halve-every", 0, INT32_MAX);
     else if (take("--threads"))
-      o.threads = args.intValue("--threads");
+      o.threads = args.intValue("--threads", 1, 1024);
     else if (take("--seed"))
-      o.seed = std::to_string(args.intValue("--seed"));
+      o.seed = std::to_string(args.intValue("--seed", 0, INT32_MAX));
     else if (take("--task"))
       o.task = args.value("--task");
-    else if (take("--spp"))
+    else if (take("--spp")) {
       o.spp = args.value("--spp");
-    else if (take("--val-every"))
-      o.val_every = args.intValue("--val-every");
+      cli::intList("--spp", o.spp, 1, 1 << 24);
+    } else if (take("--val-every"))
+      o.val_every = args.intValue("--val-every", 0, INT32_MAX);
     else if (take("--val-samples"))
-      o.val_samples = args.intValue("--val-samples");
+      o.val_samples = args.intValue("--val-samples", 1, 100000);
     else if (take("--train-split"))
       o.train_split = args.value("--train-split");
     else if (take("--val-split"))
       o.val_split = args.value("--val-split");
     else if (take("--checkpoint-minutes"))
-      o.checkpoint_minutes = args.doubleValue("--checkpoint-minutes");
+      o.checkpoint_minutes = args.doubleValue("--checkpoint-minutes", 0.0, 1e6);
     else if (take("--resume"))
       o.resume = true;
     else if (take("--buffers"))
       o.net.input_buffers = cli::splitList(args.value("--buffers"));
     else if (take("--widths"))
-      o.net.widths = toInt64s("--widths", args.value("--widths"));
+      o.net.widths = toInt64s("--widths", args.value("--widths"), 1, 1024);
     else if (take("--dilations"))
-      o.net.dilations = toInt64s("--dilations", args.value("--dilations"));
+      o.net.dilations = toInt64s("--dilations", args.value("--dilations"), 1, 64);
     else if (take("--feature-dims"))
-      o.net.feature_dims = args.intValue("--feature-dims");
+      o.net.feature_dims = args.intValue("--feature-dims", 1, 256);
     else if (take("--demodulate"))
       o.net.demodulate = onOff("--demodulate", args.value("--demodulate"));
     else
@@ -212,17 +219,14 @@ TrainOptions parseTrain(cli::Args& args) {
   }
   if (o.out.empty()) throw cli::UsageError("train needs --out MODEL");
   if (o.data.empty() && !o.resume) throw cli::UsageError("train needs --data DIR");
-  const auto out_dir = fs::absolute(o.out).parent_path();
-  if (!fs::is_directory(out_dir))
-    throw IoError(o.out + ": the folder " + out_dir.string() + " does not exist");
   if (o.log.empty()) o.log = o.out + ".log.jsonl";
   if (o.checkpoint.empty()) o.checkpoint = o.out + ".ckpt";
+  // The model, its log and its checkpoint are three different files; a resumed
+  // run reads the checkpoint it then rewrites, which is the point of it.
+  cli::checkFiles({}, {{o.out, "--out"}, {o.log, "--log"}, {o.checkpoint, "--checkpoint"}});
   if (!o.resume && fs::exists(o.checkpoint))
     throw cli::UsageError(o.checkpoint + " exists: continue that run with --resume, or delete it");
-  if (o.steps < 1 || o.batch < 1 || o.crop < 8 || o.threads < 1 || o.val_every < 0 ||
-      o.val_samples < 1 || o.halve_every < 0 || !(o.lr > 0) || !(o.checkpoint_minutes > 0))
-    throw cli::UsageError(
-        "train: --steps, --batch, --threads, --val-samples must be >= 1, --crop >= 8, --lr > 0");
+  if (!(o.checkpoint_minutes > 0)) throw cli::UsageError("--checkpoint-minutes must be above 0");
   try {
     kernelTaskFromName(o.task);
     o.net.validate();
@@ -323,8 +327,9 @@ class JsonLog {
   std::ofstream out_;
 };
 
-int runTrain(cli::Args& args) {
+int runTrain(cli::Args& args, int argc, char** argv) {
   TrainOptions o = parseTrain(args);
+  o.command = cli::commandLine(argc, argv);
   torch::set_num_threads(o.threads);
   KernelModelInfo info;
   info.net = o.net;
@@ -340,11 +345,14 @@ int runTrain(cli::Args& args) {
     position = std::stoull(state.at("loader_position"));
     seconds_before = std::stod(state.at("seconds"));
   }
-  trainer.info().notes = {{"data", o.data},
-                          {"task", o.task},
-                          {"batch", std::to_string(o.batch)},
-                          {"crop", std::to_string(o.crop)},
-                          {"spp", o.spp}};
+  trainer.info().notes = {
+      {"software", fmt::format("dncleanse {} ({})", DN_PROJECT_VERSION, DN_GIT_DESCRIBE)},
+      {"command", o.command},
+      {"data", o.data},
+      {"task", o.task},
+      {"batch", std::to_string(o.batch)},
+      {"crop", std::to_string(o.crop)},
+      {"spp", o.spp}};
 
   data::LoaderOptions loader_options;
   loader_options.batchSize = o.batch;
@@ -443,7 +451,16 @@ int runTrain(cli::Args& args) {
 
 // ---------------------------------------------------------------- apply
 
-int runApply(cli::Args& args) {
+// Written as float: overflow (a 3.4e38 pixel through the kernels) becomes the
+// largest float rather than Inf.
+Image finiteResult(Image result, const std::string& name) {
+  if (const std::size_t n = cli::clampToFinite(result))
+    std::fprintf(stderr, "dncleanse: %s: %zu values beyond the float range clamped\n", name.c_str(),
+                 n);
+  return result;
+}
+
+int runApply(cli::Args& args, int argc, char** argv) {
   std::string model_path, data_dir, source = "a";
   bool force = false;
   int threads = 2;
@@ -457,15 +474,17 @@ int runApply(cli::Args& args) {
     else if (args.flag("--source"))
       source = args.value("--source");
     else if (args.flag("--threads"))
-      threads = args.intValue("--threads");
+      threads = args.intValue("--threads", 1, 1024);
     else
       throw cli::UsageError("apply: unknown argument '" + args.peek() + "'");
   }
   if (model_path.empty() || data_dir.empty())
     throw cli::UsageError("apply needs --model and --data");
   if (source != "a" && source != "b") throw cli::UsageError("--source must be a or b");
-  torch::set_num_threads(std::max(1, threads));
+  cli::checkReadable(model_path);
+  torch::set_num_threads(threads);
   auto model = loadKernelModel(model_path);
+  cli::setToolProvenance("dncleanse", argc, argv, model_path);
   if (model.info.task != KernelTask::Cleanse)
     throw ModelError(model_path + ": a " + kernelTaskName(model.info.task) +
                      " model; apply --data needs a cleanse model");
@@ -483,7 +502,7 @@ int runApply(cli::Args& args) {
       continue;
     }
     const auto frame = readFrame((dir / ("gt_" + source + ".exr")).string(), read);
-    writeImage(out, runKernelNet(model.net, frame), false, {"R", "G", "B"});
+    writeImage(out, finiteResult(runKernelNet(model.net, frame), out), false, {"R", "G", "B"});
     ++written;
     const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
     progress.update(double(i + 1) / frames.size(), fmt::format("frame {}/{}  {:.2f} s/frame", i + 1,
@@ -498,7 +517,7 @@ int runApply(cli::Args& args) {
 
 // ---------------------------------------------------------------- one file
 
-int runFile(cli::Args& args) {
+int runFile(cli::Args& args, int argc, char** argv) {
   std::string input, output, model_path, layer, viewLayer;
   bool rgb = false;
   int threads = 2;
@@ -507,14 +526,16 @@ int runFile(cli::Args& args) {
       output = args.value("-o");
     else if (args.flag("--model"))
       model_path = args.value("--model");
-    else if (args.flag("--layer"))
+    else if (args.flag("--layer")) {
       layer = args.value("--layer");
-    else if (args.flag("--view-layer"))
+      if (layer.empty() || layer.find_first_of(". \t\n") != std::string::npos)
+        throw cli::UsageError("--layer needs a name without dots or spaces, got '" + layer + "'");
+    } else if (args.flag("--view-layer"))
       viewLayer = args.value("--view-layer");
     else if (args.flag("--rgb-only"))
       rgb = true;
     else if (args.flag("--threads"))
-      threads = args.intValue("--threads");
+      threads = args.intValue("--threads", 1, 1024);
     else if (args.peek().rfind("-", 0) == 0 && args.peek() != "-")
       throw cli::UsageError("unknown option '" + args.peek() + "'");
     else if (input.empty())
@@ -524,7 +545,8 @@ int runFile(cli::Args& args) {
   }
   if (input.empty() || output.empty() || model_path.empty())
     throw cli::UsageError("usage: dncleanse IN.exr -o OUT.exr --model MODEL (see --help)");
-  torch::set_num_threads(std::max(1, threads));
+  cli::checkFiles({input, model_path}, {{output, input}});
+  torch::set_num_threads(threads);
   auto model = loadKernelModel(model_path);
   ReadOptions read;
   read.only = requiredBuffers(model.info.net);
@@ -537,13 +559,16 @@ int runFile(cli::Args& args) {
                     ? layer
                     : layerPrefixOf(frame) +
                           (model.info.task == KernelTask::Cleanse ? "Cleansed" : "Denoised");
-  writeResult(input, output, runKernelNet(model.net, frame), write);
+  cli::setToolProvenance("dncleanse", argc, argv, model_path);
+  writeResult(input, output, finiteResult(runKernelNet(model.net, frame), input), write);
   return cli::kExitOk;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Training replaces this with a handler that saves a checkpoint.
+  removeTemporaryFilesOnSignal("dncleanse");
   try {
     cli::Args args(argc, argv);
     if (args.done()) throw cli::UsageError("no arguments (see --help)");
@@ -551,9 +576,15 @@ int main(int argc, char** argv) {
       std::fputs(kUsage, stdout);
       return cli::kExitOk;
     }
-    if (args.flag("train")) return runTrain(args);
-    if (args.flag("apply")) return runApply(args);
-    return runFile(args);
+    if (args.flag("--version")) {
+      auto components = cli::commonComponents();
+      components.emplace_back("LibTorch", TORCH_VERSION);
+      std::fputs(cli::versionText("dncleanse", components).c_str(), stdout);
+      return cli::kExitOk;
+    }
+    if (args.flag("train")) return runTrain(args, argc, argv);
+    if (args.flag("apply")) return runApply(args, argc, argv);
+    return runFile(args, argc, argv);
   } catch (const cli::UsageError& error) {
     std::fprintf(stderr, "dncleanse: %s\n", error.what());
   } catch (const IoError& error) {

@@ -5,6 +5,7 @@
 //   dndenoise shot.####.exr -o out.####.exr
 #include <fmt/format.h>
 #include <torch/torch.h>
+#include <torch/version.h>
 
 #include <algorithm>
 #include <chrono>
@@ -16,12 +17,15 @@
 #include <sstream>
 #include <thread>
 
+#include "common/app.h"
 #include "common/cli.h"
 #include "common/progress.h"
 #include "common/sequence.h"
 #include "dn/io/preview_io.h"
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
+#include "common/finite.h"
+#include "dn/io/output_files.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 
@@ -33,7 +37,7 @@ namespace {
 
 const char* kUsage = R"(usage: dndenoise [options] IN.exr -o OUT.exr
        dndenoise [options] --color FILE [--albedo FILE --normal FILE ...] -o OUT
-       dndenoise [options] IN.####.exr -o OUT.####.exr      (frame sequences; also %04d)
+       dndenoise [options] IN.#.exr -o OUT.#.exr            (frame sequences, as oiiotool)
        dndenoise [options] A.exr B.exr ... -o DIR/           (many files, model loaded once)
 
 Denoises renders with the diffusion model. Multilayer EXRs from Blender/Cycles
@@ -42,24 +46,28 @@ names are read as they are; the result is added as a layer beside every input
 layer and the input's metadata (or written alone with --rgb-only).
 
 model and sampling:
-  --model FILE        model file (default: $DN_MODEL, else the shipped models/default.dnm)
-  --steps N           diffusion steps of the respaced schedule (default: the model's, 27)
-  --skip S            skip the S noisiest steps, starting from the noised render
+  --model FILE        model file (default: $DN_MODEL, else default.dnm in $DN_MODEL_DIR,
+                      else the shipped models/default.dnm beside the executable)
+  --steps N           diffusion steps of the respaced schedule, 1-1000 (default: the
+                      model's, 27)
+  --skip S            skip the S noisiest steps (0 <= S < steps), starting from the
+                      noised render
                       (default: the model's tuned value, adapted to the noise
                       measured on the render; docs/dndenoise.md)
-  --spp N             the input's samples per pixel (default: the file's Cycles
+  --spp N             the input's samples per pixel, >= 1 (default: the file's Cycles
                       metadata); given, it scales the default skip and
                       --mean-match instead of the measured noise
-  --sampler ddpm|ddim sampler (default ddpm); --eta E for DDIM
-  --seed N            random seed (default 0): same seed, same output
-  --samples K         mean of K samples, plus their standard deviation as an
+  --sampler ddpm|ddim sampler (default ddpm); --eta E (0-1) for DDIM
+  --seed N            random seed >= 0 (default 0): same seed, same output
+  --samples K         mean of K samples (1-256), plus their standard deviation as an
                       'uncertainty' layer
   --exposure auto|K   scale the radiance by K before the model and back after;
                       auto (default) brings the frame's mean brightness to what
                       the model was trained on
   --mean-match SIGMA  rescale the result so its local mean (Gaussian, SIGMA px)
                       matches the render's, which is unbiased (default 2 at the
-                      model's tuning noise level, scaled with the render's; 0 = off)
+                      model's tuning noise level, scaled with the render's; 0 = off;
+                      at most 1000)
 input buffers:
   --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
@@ -69,11 +77,15 @@ input buffers:
   --buffers LIST      use only these buffers (e.g. color,albedo), to compare buffer
                       sets (default: every buffer the model knows that the input has)
 output:
-  -o, --output PATH   output file, pattern or folder (required). EXR keeps every
-                      layer; PNG, JPEG and TIFF get the denoised colour through an
-                      OpenColorIO display/view transform (see display, below)
+  -o, --output PATH   output file, pattern or folder (required; never an input). EXR
+                      keeps every layer; PNG, JPEG and TIFF get the denoised colour
+                      through an OpenColorIO display/view transform (see display, below)
   --preview PATH      also write that display picture beside the EXR: a file, or
                       a folder for sequences and many files (DIR/<output name>.png)
+  --frames RANGE      frames of a sequence, e.g. 1-100 or 1-100x2 (default: the
+                      pattern's range, else the files found); a missing frame stops
+                      the run with a line for each
+  --skip-missing      denoise the frames that exist, after naming the missing ones
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
   --rgb-only          write a plain RGB image, no other layers
   --float             float result channels (default: half); with a .tif output,
@@ -87,16 +99,18 @@ display (PNG/JPEG/TIFF outputs and --preview):
                       config also offers Filmic)
   --list-views        print the config's display / view pairs and exit
 resources:
-  --tile N            network tile size in pixels (default: from --maxmem, at most 256)
-  --overlap N         tile overlap (default 32)
-  --maxmem MB         memory budget for network activations (default 3000)
-  --threads N         CPU threads (default: all cores)
-  --device cpu|cuda   (default cpu)
+  --tile N            network tile size in pixels, 16-8192 (default: from --maxmem,
+                      at most 256)
+  --overlap N         tile overlap, 0-1024 and below the tile (default 32)
+  --maxmem MB         memory budget for network activations, >= 100 (default 3000)
+  --threads N         CPU threads, 1-1024 (default: all cores)
+  --device cpu|cuda   (default cpu; cuda needs a CUDA build of LibTorch and a GPU)
 checks and timing:
   --ref REF --maxerror [METRIC=]V   exit 2 if the result is worse than V against REF
                       (METRIC: l1 (default), mse, relmse, psnr, ssim, smape, flip)
-  -n N                denoise N times and report the times
+  -n N                denoise N times (1-1000) and report the times
   -v                  progress with ETA and input statistics on stderr
+  --version           versions of the tool and its libraries
   -h, --help          this text
 exit codes: 0 ok, 1 bad input or arguments, 2 a --maxerror check failed
 )";
@@ -107,8 +121,9 @@ struct Options {
   ReadOptions read;
   std::vector<std::string> buffers;  // --buffers: the only buffers to use
   std::string output, model, layer = "Denoised", reference, maxErrorMetric = "l1", device = "cpu";
+  std::string frames;
   double maxError = -1.0;
-  bool rgbOnly = false, floatOut = false, inplace = false, verbose = false;
+  bool rgbOnly = false, floatOut = false, inplace = false, verbose = false, skipMissing = false;
   int repeats = 1;
   DenoiseOptions denoise;
   std::string preview;
@@ -116,9 +131,17 @@ struct Options {
   bool listViews = false;
 };
 
-std::string defaultModelPath() {
-  if (const char* env = std::getenv("DN_MODEL"); env && *env) return env;
-  return DN_DEFAULT_MODEL;
+// The network's size multiple: a smaller tile cannot be denoised.
+constexpr int kMinTile = 16;
+
+// Ranges that need two options at once.
+void checkOptionPairs(const Options& o) {
+  if (o.denoise.tile > 0 && o.denoise.overlap >= o.denoise.tile)
+    throw cli::UsageError(fmt::format("--overlap {} must be smaller than --tile {}",
+                                      o.denoise.overlap, o.denoise.tile));
+  if (!o.denoise.respacing.empty() && o.denoise.skip >= std::stoi(o.denoise.respacing))
+    throw cli::UsageError(fmt::format("--skip {} must be smaller than --steps {}", o.denoise.skip,
+                                      o.denoise.respacing));
 }
 
 std::vector<std::string> splitBufferList(const std::string& text) {
@@ -137,7 +160,6 @@ std::vector<std::string> splitBufferList(const std::string& text) {
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
-  o.model = defaultModelPath();
   torch::set_num_threads(
       static_cast<int>(std::thread::hardware_concurrency()));  // LibTorch starts with 1
   while (!args.done()) {
@@ -145,36 +167,38 @@ Options parseArgs(int argc, char** argv) {
     if (args.flag("-h", "--help")) {
       std::fputs(kUsage, stdout);
       std::exit(cli::kExitOk);
+    } else if (args.flag("--version")) {
+      auto components = cli::commonComponents();
+      components.emplace_back("LibTorch", TORCH_VERSION);
+      std::fputs(cli::versionText("dndenoise", components).c_str(), stdout);
+      std::exit(cli::kExitOk);
     } else if (args.flag("-o", "--output")) {
       o.output = args.value("-o");
     } else if (args.flag("--model")) {
       o.model = args.value("--model");
     } else if (args.flag("--steps")) {
-      o.denoise.respacing = std::to_string(args.intValue("--steps"));
+      o.denoise.respacing = std::to_string(args.intValue("--steps", 1, 1000));
     } else if (args.flag("--skip")) {
-      o.denoise.skip = args.intValue("--skip");
+      o.denoise.skip = args.intValue("--skip", 0, 999);
     } else if (args.flag("--sampler")) {
       std::string s = args.value("--sampler");
       if (s != "ddpm" && s != "ddim") throw cli::UsageError("--sampler must be ddpm or ddim");
       o.denoise.sampler = s == "ddim" ? SamplerKind::Ddim : SamplerKind::Ddpm;
     } else if (args.flag("--eta")) {
-      o.denoise.eta = args.doubleValue("--eta");
+      o.denoise.eta = args.doubleValue("--eta", 0.0, 1.0);
     } else if (args.flag("--spp")) {
-      o.denoise.spp = args.intValue("--spp");
-      if (o.denoise.spp < 1) throw cli::UsageError("--spp must be at least 1");
+      o.denoise.spp = args.intValue("--spp", 1, 1 << 24);
     } else if (args.flag("--exposure")) {
       const std::string v = args.value("--exposure");
       o.denoise.exposure = v == "auto" ? 0.0 : cli::Args::toDouble("--exposure", v);
-      if (!(o.denoise.exposure >= 0.0) || (v != "auto" && o.denoise.exposure == 0.0))
-        throw cli::UsageError("--exposure must be auto or a positive number");
+      if (v != "auto" && !(o.denoise.exposure > 0.0 && o.denoise.exposure <= 1e6))
+        throw cli::UsageError("--exposure must be auto or a number in (0, 1e6], got " + v);
     } else if (args.flag("--seed")) {
-      o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed"));
+      o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     } else if (args.flag("--samples")) {
-      o.denoise.samples = args.intValue("--samples");
-      if (o.denoise.samples < 1) throw cli::UsageError("--samples must be at least 1");
+      o.denoise.samples = args.intValue("--samples", 1, 256);
     } else if (args.flag("--mean-match")) {
-      o.denoise.meanMatchSigma = args.doubleValue("--mean-match");
-      if (o.denoise.meanMatchSigma < 0) throw cli::UsageError("--mean-match must be >= 0");
+      o.denoise.meanMatchSigma = args.doubleValue("--mean-match", 0.0, 1000.0);
     } else if (args.flag("--channels")) {
       try {
         o.read.overrides.insert(parseChannelOverride(args.value("--channels")));
@@ -187,6 +211,13 @@ Options parseArgs(int argc, char** argv) {
       o.read.viewLayer = args.value("--view-layer");
     } else if (args.flag("--layer")) {
       o.layer = args.value("--layer");
+      if (o.layer.empty() || o.layer.find_first_of(". \t\n") != std::string::npos)
+        throw cli::UsageError("--layer needs a name without dots or spaces, got '" + o.layer + "'");
+    } else if (args.flag("--frames")) {
+      o.frames = args.value("--frames");
+      cli::parseFrameRange(o.frames);
+    } else if (args.flag("--skip-missing")) {
+      o.skipMissing = true;
     } else if (args.flag("--rgb-only")) {
       o.rgbOnly = true;
     } else if (args.flag("--float")) {
@@ -204,13 +235,13 @@ Options parseArgs(int argc, char** argv) {
     } else if (args.flag("--list-views")) {
       o.listViews = true;
     } else if (args.flag("--tile")) {
-      o.denoise.tile = args.intValue("--tile");
+      o.denoise.tile = args.intValue("--tile", kMinTile, 8192);
     } else if (args.flag("--overlap")) {
-      o.denoise.overlap = args.intValue("--overlap");
+      o.denoise.overlap = args.intValue("--overlap", 0, 1024);
     } else if (args.flag("--maxmem")) {
-      o.denoise.maxMemoryBytes = args.doubleValue("--maxmem") * 1e6;
+      o.denoise.maxMemoryBytes = args.doubleValue("--maxmem", 100.0, 1e7) * 1e6;
     } else if (args.flag("--threads")) {
-      int n = args.intValue("--threads");
+      int n = args.intValue("--threads", 1, 1024);
       torch::set_num_threads(n);
       kernelThreadCount() = n;
     } else if (args.flag("--device")) {
@@ -224,8 +255,9 @@ Options parseArgs(int argc, char** argv) {
       if (!metrics::isMetricName(o.maxErrorMetric))
         throw cli::UsageError("--maxerror: unknown metric '" + o.maxErrorMetric + "'");
       o.maxError = cli::Args::toDouble("--maxerror", v);
+      if (o.maxError < 0) throw cli::UsageError("--maxerror must be >= 0, got " + v);
     } else if (args.flag("-n")) {
-      o.repeats = std::max(1, args.intValue("-n"));
+      o.repeats = args.intValue("-n", 1, 1000);
     } else if (args.flag("-v", "--verbose")) {
       o.verbose = true;
     } else if (a.size() > 2 && a[0] == '-' && a[1] == '-') {
@@ -251,11 +283,16 @@ Options parseArgs(int argc, char** argv) {
     throw cli::UsageError(o.inputs.empty()
                               ? "no input given (see --help)"
                               : "give either IN files or --color/--albedo/... files, not both");
+  if (!o.separateFiles.empty() && !o.separateFiles.count("color"))
+    throw cli::UsageError("separate buffer files need --color FILE");
   if (o.maxError >= 0 && o.reference.empty()) throw cli::UsageError("--maxerror needs --ref REF");
+  if (!o.reference.empty() && o.maxError < 0) throw cli::UsageError("--ref needs --maxerror");
+  checkOptionPairs(o);
   if (o.device != "cpu" && o.device != "cuda")
     throw cli::UsageError("--device must be cpu or cuda");
   if (o.device == "cuda" && !torch::cuda::is_available())
-    throw cli::UsageError("--device cuda: this LibTorch build has no usable CUDA device");
+    throw cli::UsageError("--device cuda: no CUDA device is available to this LibTorch build");
+  if (o.model.empty()) o.model = cli::defaultModelPath();
   return o;
 }
 
@@ -263,24 +300,26 @@ Options parseArgs(int argc, char** argv) {
 std::vector<std::pair<std::string, std::string>> planJobs(const Options& o) {
   std::vector<std::pair<std::string, std::string>> jobs;
   if (!o.separateFiles.empty()) return {{"", o.output}};
-  const cli::FramePattern outPattern = cli::parseFramePattern(o.output);
+  const bool outPattern = cli::isFramePattern(o.output);
   for (const auto& input : o.inputs) {
-    cli::FramePattern inPattern = cli::parseFramePattern(input);
-    if (inPattern.padding > 0) {
-      if (outPattern.padding == 0)
-        throw cli::UsageError("a frame sequence needs an output pattern such as out.####.exr");
-      auto frames = cli::findFrames(inPattern);
-      if (frames.empty()) throw IoError(input + ": no frames match this pattern");
-      for (const auto& [number, path] : frames)
-        jobs.emplace_back(path, cli::frameName(outPattern, number));
+    if (cli::isFramePattern(input)) {
+      if (!outPattern)
+        throw cli::UsageError("a frame sequence needs an output pattern such as out.#.exr");
+      for (const auto& [number, path] :
+           cli::sequenceFrames(input, o.frames, o.skipMissing, "dndenoise"))
+        jobs.emplace_back(path, cli::frameFile(o.output, number));
     } else if (o.inputs.size() > 1 || fs::is_directory(o.output)) {
       if (!fs::is_directory(o.output))
         throw cli::UsageError("several inputs need -o to be an existing folder");
       jobs.emplace_back(input, (fs::path(o.output) / fs::path(input).filename()).string());
     } else {
+      if (outPattern)
+        throw cli::UsageError(o.output + ": an output pattern needs an input pattern");
       jobs.emplace_back(input, o.output);
     }
   }
+  if (!o.frames.empty() && std::none_of(o.inputs.begin(), o.inputs.end(), cli::isFramePattern))
+    throw cli::UsageError("--frames needs an input pattern such as in.#.exr");
   return jobs;
 }
 
@@ -321,6 +360,25 @@ std::optional<tonemap::OcioDisplay> displayFor(
   return display;
 }
 
+// Every check that needs no denoising, before the first frame: files readable,
+// no output over an input or over another output, output folders writable.
+void checkFilesBeforeWork(const Options& o,
+                          const std::vector<std::pair<std::string, std::string>>& jobs,
+                          const std::vector<std::string>& previews) {
+  std::vector<std::string> inputs = {o.model};
+  std::vector<cli::Output> outputs;
+  for (const auto& [buffer, file] : o.separateFiles) inputs.push_back(file);
+  for (std::size_t j = 0; j < jobs.size(); ++j) {
+    const auto& [input, output] = jobs[j];
+    const std::string source = input.empty() ? o.separateFiles.at("color") : input;
+    if (!input.empty()) inputs.push_back(input);
+    outputs.push_back({output, source});
+    if (!previews.empty()) outputs.push_back({previews[j], source});
+  }
+  if (!o.reference.empty()) inputs.push_back(o.reference);
+  cli::checkFiles(inputs, outputs, o.inplace ? cli::Inplace::Allow : cli::Inplace::Offer);
+}
+
 // Counts what the model will not see as radiance: NaN/Inf and negative values.
 void reportInputStatistics(const std::string& name, const Image& color) {
   std::size_t nonFinite = 0, negative = 0;
@@ -329,9 +387,7 @@ void reportInputStatistics(const std::string& name, const Image& color) {
              name, color.width, color.height, nonFinite, negative);
 }
 
-void checkAgainstReference(const Options& o, const Image& result, int& status) {
-  Image ref = readImage(o.reference, 3);
-  countAndZeroNonFinite(ref);
+void checkAgainstReference(const Options& o, const Image& ref, const Image& result, int& status) {
   auto values = metrics::compare(ref, result, {o.maxErrorMetric}).values;
   double v = values.at(o.maxErrorMetric);
   bool worse = metrics::higherIsBetter(o.maxErrorMetric) ? !(v >= o.maxError) : !(v <= o.maxError);
@@ -365,6 +421,19 @@ void checkModelInputs(const Denoiser& denoiser, const std::string& name,
       name, needs, hasList));
 }
 
+// What to read of `input`, from its header: the colour and the buffers the model
+// needs (one line naming what it lacks).
+ReadOptions readInputHeader(const Options& o, const Denoiser& denoiser, const std::string& input) {
+  ReadOptions read = o.read;
+  const std::vector<std::string> has = allowed(o, availableBuffers(input, read));
+  // Without a colour, readFrame says what is wrong.
+  if (std::find(has.begin(), has.end(), "color") != has.end()) {
+    checkModelInputs(denoiser, input, has);
+    read.only = denoiser.usableBuffers(has);
+  }
+  return read;
+}
+
 // Only the buffers the model reads: the file's other layers are copied from it
 // when the result is written, and holding them as float would cost 1.5 GB on a
 // 4K frame with all of Cycles' passes.
@@ -389,20 +458,30 @@ FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::st
     checkModelInputs(denoiser, name, frame.names());
     return frame;
   }
-  ReadOptions read = o.read;
-  const std::vector<std::string> has = allowed(o, availableBuffers(input, read));
-  // Without a colour, readFrame says what is wrong.
-  if (std::find(has.begin(), has.end(), "color") != has.end()) {
-    checkModelInputs(denoiser, name, has);
-    read.only = denoiser.usableBuffers(has);
-  }
-  return readFrame(input, read);
+  return readFrame(input, readInputHeader(o, denoiser, input));
 }
 
-int run(Options o) {
+// The reference of --ref, read before any work; its size must match every input.
+Image readReference(const Options& o) {
+  Image ref = readImage(o.reference, 3);
+  countAndZeroNonFinite(ref);
+  return ref;
+}
+
+void checkReferenceSize(const Options& o, const Image& ref, const FrameBuffers& frame,
+                        const std::string& name) {
+  if (ref.width != frame.width || ref.height != frame.height)
+    throw IoError(fmt::format("{}: is {}x{} but the reference {} is {}x{}", name, frame.width,
+                              frame.height, o.reference, ref.width, ref.height));
+}
+
+int run(Options o, int argc, char** argv) {
   auto jobs = planJobs(o);
   const std::vector<std::string> previews = planPreviews(o, jobs);
   const std::optional<tonemap::OcioDisplay> display = displayFor(o, jobs);
+}
+
+  checkFilesBeforeWork(o, jobs, previews);
   const auto loadStart = Clock::now();
   Denoiser denoiser = [&] {
     try {
@@ -414,6 +493,11 @@ int run(Options o) {
   if (o.verbose)
     fmt::print(stderr, "dndenoise: model {} loaded in {:.2f} s\n", o.model,
                std::chrono::duration<double>(Clock::now() - loadStart).count());
+  cli::setToolProvenance("dndenoise", argc, argv, o.model);
+  const Image ref = o.reference.empty() ? Image() : readReference(o);
+  // Every input's header before the first frame: a bad frame 90 fails now, not in an hour.
+  for (const auto& [input, output] : jobs)
+    if (!input.empty()) readInputHeader(o, denoiser, input);
 
   int status = cli::kExitOk;
   std::optional<cli::Progress> progress;
@@ -421,10 +505,8 @@ int run(Options o) {
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const auto& [input, output] = jobs[j];
     const std::string name = input.empty() ? o.separateFiles.at("color") : input;
-    std::error_code ec;
-    if (!input.empty() && !o.inplace && fs::exists(output, ec) && fs::equivalent(input, output, ec))
-      throw IoError(output + ": is the input file; refusing to overwrite it (use --inplace)");
     FrameBuffers frame = readInput(o, denoiser, input, name);
+    if (!ref.empty()) checkReferenceSize(o, ref, frame, name);
     if (o.verbose) {
       for (const auto& note : frame.notes) fmt::print(stderr, "dndenoise: {}: {}\n", name, note);
       reportInputStatistics(name, frame.get("color"));
@@ -476,6 +558,12 @@ int run(Options o) {
           times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     }
 
+    // Nothing non-finite leaves the tool: overflow becomes the largest float.
+    const std::size_t clamped =
+        cli::clampToFinite(result.color) + cli::clampToFinite(result.uncertainty);
+    if (clamped > 0)
+      fmt::print(stderr, "dndenoise: {}: {} values beyond the float range clamped\n", name,
+                 clamped);
     const OutputKind kind = outputKindFor(output, o.floatOut);
     if (kind == OutputKind::Display) {
       writeDisplayImage(output, result.color, *display);
@@ -496,7 +584,7 @@ int run(Options o) {
     if (o.verbose)
       fmt::print(stderr, "dndenoise: wrote {}{}\n", output,
                  previews.empty() ? "" : " and " + previews[j]);
-    if (!o.reference.empty() && o.maxError >= 0) checkAgainstReference(o, result.color, status);
+    if (!ref.empty()) checkAgainstReference(o, ref, result.color, status);
   }
   return status;
 }
@@ -504,8 +592,9 @@ int run(Options o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  removeTemporaryFilesOnSignal("dndenoise");
   try {
-    return run(parseArgs(argc, argv));
+    return run(parseArgs(argc, argv), argc, argv);
   } catch (const std::exception& e) {
     fmt::print(stderr, "dndenoise: {}\n", e.what());
   }

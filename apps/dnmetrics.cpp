@@ -3,6 +3,8 @@
 //   dnmetrics REFDIR TESTDIR       same-named files of two folders, with a summary
 #include <fmt/format.h>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -12,10 +14,13 @@
 #include <optional>
 #include <set>
 
+#include "common/app.h"
 #include "common/cli.h"
 #include "common/progress.h"
 #include "dn/io/buffer_io.h"
 #include "dn/flip.h"
+#include "dn/io/buffer_io.h"
+#include "dn/io/output_files.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 
@@ -35,16 +40,20 @@ images encoded as sRGB; hdrflip is HDR-FLIP of the linear images.
 options:
   --metrics LIST         comma-separated subset of: l1,mse,relmse,psnr,ssim,smape,flip,hdrflip
                          (default: all)
-  --format table|csv|json  output format (default: table)
-  --heatmap FILE.png     write the FLIP error map in colour (one TEST only)
-  --maxerror METRIC=V    exit with code 2 if any result is worse than V (repeatable;
-                         for psnr and ssim, worse means lower)
+  --format table|csv|json  output format (default: table); identical images have
+                         PSNR inf: "inf" in the table and CSV, the string "inf" in
+                         JSON (an undefined std is "nan" in JSON, n/a in the table)
+  --heatmap FILE.png     write the FLIP error map in colour (one TEST only; never
+                         one of the inputs)
+  --maxerror METRIC=V    exit with code 2 if any result is worse than V >= 0
+                         (repeatable; for psnr and ssim, worse means lower)
   --ref-channels LIST    channel names to read from REF, e.g. R,G,B
   --test-channels LIST   channel names to read from each TEST
                          (default: the colour of the file, or its Denoised layer if present)
   --nonfinite error|zero NaN/Inf pixels: fail (default) or count them as 0 and report
-  --threads N            worker threads (default: all cores)
+  --threads N            worker threads, 1-1024 (default: all cores)
   -v                     progress file by file on stderr
+  --version              versions of the tool and its libraries
   -h, --help             this text
 exit codes: 0 ok, 1 bad input or arguments, 2 a --maxerror check failed
 )";
@@ -60,6 +69,13 @@ struct Options {
   bool verbose = false;
 };
 
+std::vector<std::string> channelList(const std::string& option, const std::string& text) {
+  auto list = cli::splitList(text);
+  if (list.size() != 1 && list.size() != 3)
+    throw cli::UsageError(option + " needs 1 or 3 channel names, e.g. R,G,B; got '" + text + "'");
+  return list;
+}
+
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
@@ -67,8 +83,12 @@ Options parseArgs(int argc, char** argv) {
     if (args.flag("-h", "--help")) {
       std::fputs(kUsage, stdout);
       std::exit(cli::kExitOk);
+    } else if (args.flag("--version")) {
+      std::fputs(cli::versionText("dnmetrics", cli::commonComponents()).c_str(), stdout);
+      std::exit(cli::kExitOk);
     } else if (args.flag("--metrics")) {
       o.metrics = cli::splitList(args.value("--metrics"));
+      if (o.metrics.empty()) throw cli::UsageError("--metrics needs a list such as l1,psnr");
       for (const auto& m : o.metrics)
         if (!metrics::isMetricName(m))
           throw cli::UsageError("--metrics: unknown metric '" + m + "'");
@@ -85,17 +105,19 @@ Options parseArgs(int argc, char** argv) {
       if (eq == std::string::npos || !metrics::isMetricName(name))
         throw cli::UsageError("--maxerror expects METRIC=VALUE with a known metric, got '" + spec +
                               "'");
-      o.maxErrors.emplace_back(name, cli::Args::toDouble("--maxerror", spec.substr(eq + 1)));
+      const double limit = cli::Args::toDouble("--maxerror", spec.substr(eq + 1));
+      if (limit < 0) throw cli::UsageError("--maxerror must be >= 0, got '" + spec + "'");
+      o.maxErrors.emplace_back(name, limit);
     } else if (args.flag("--ref-channels")) {
-      o.refChannels = cli::splitList(args.value("--ref-channels"));
+      o.refChannels = channelList("--ref-channels", args.value("--ref-channels"));
     } else if (args.flag("--test-channels")) {
-      o.testChannels = cli::splitList(args.value("--test-channels"));
+      o.testChannels = channelList("--test-channels", args.value("--test-channels"));
     } else if (args.flag("--nonfinite")) {
       std::string v = args.value("--nonfinite");
       if (v != "error" && v != "zero") throw cli::UsageError("--nonfinite must be error or zero");
       o.zeroNonFinite = v == "zero";
     } else if (args.flag("--threads")) {
-      kernelThreadCount() = args.intValue("--threads");
+      kernelThreadCount() = args.intValue("--threads", 1, 1024);
     } else if (args.flag("-v", "--verbose")) {
       o.verbose = true;
     } else if (args.peek().size() > 1 && args.peek()[0] == '-') {
@@ -204,7 +226,30 @@ std::pair<double, double> meanAndStd(const std::vector<Row>& rows, const std::st
   return {mean, rows.size() > 1 ? std::sqrt(sq / (rows.size() - 1)) : 0.0};
 }
 
-std::string jsonNumber(double v) { return std::isfinite(v) ? fmt::format("{:.8g}", v) : "null"; }
+// JSON has no infinity: identical images' PSNR is the string "inf" (and an
+// undefined spread "nan"), as the table and CSV print them.
+using Json = nlohmann::ordered_json;  // keys in the order written
+
+Json jsonNumber(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  return v;
+}
+
+// RFC 4180: a field holding a comma, a quote or a line break is quoted, its
+// quotes doubled.
+std::string csvField(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string out = "\"";
+  for (char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return out + "\"";
+}
+
+std::string csvNumber(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  return fmt::format("{:.8g}", v);
+}
 
 // Table cells: 5 significant digits; "inf" for a perfect PSNR, "n/a" for undefined spreads.
 std::string cell(double v) {
@@ -212,43 +257,40 @@ std::string cell(double v) {
   return std::isinf(v) ? "inf" : fmt::format("{:.5g}", v);
 }
 
-std::string jsonString(const std::string& s) {
-  std::string out = "\"";
-  for (char ch : s) {
-    if (ch == '"' || ch == '\\') out += '\\';
-    out += ch;
-  }
-  return out + "\"";
-}
-
 void print(const Options& o, const std::vector<Row>& rows) {
   const bool summary = rows.size() > 1;
   if (o.format == "json") {
     auto object = [&](const std::map<std::string, double>& values) {
-      std::string s;
-      for (const auto& m : o.metrics)
-        s += fmt::format("{}\"{}\": {}", s.empty() ? "" : ", ", m, jsonNumber(values.at(m)));
-      return s;
+      Json j = Json::object();
+      for (const auto& m : o.metrics) j[m] = jsonNumber(values.at(m));
+      return j;
     };
-    fmt::print("{{\n  \"reference\": {},\n  \"results\": [\n", jsonString(o.inputs[0]));
-    for (std::size_t i = 0; i < rows.size(); ++i)
-      fmt::print("    {{\"file\": {}, {}}}{}\n", jsonString(rows[i].name), object(rows[i].values),
-                 i + 1 < rows.size() ? "," : "");
+    Json out;
+    out["reference"] = o.inputs[0];
+    out["results"] = Json::array();
+    for (const auto& r : rows) {
+      Json row = {{"file", r.name}};
+      row.update(object(r.values));
+      out["results"].push_back(row);
+    }
     std::map<std::string, double> mean, spread;
     for (const auto& m : o.metrics) std::tie(mean[m], spread[m]) = meanAndStd(rows, m);
-    fmt::print("  ],\n  \"mean\": {{{}}},\n  \"std\": {{{}}}\n}}\n", object(mean), object(spread));
+    out["mean"] = object(mean);
+    out["std"] = object(spread);
+    // Invalid UTF-8 in a file name is replaced, not thrown.
+    fmt::print("{}\n", out.dump(2, ' ', false, Json::error_handler_t::replace));
   } else if (o.format == "csv") {
     fmt::print("file");
     for (const auto& m : o.metrics) fmt::print(",{}", m);
     fmt::print("\n");
     for (const auto& r : rows) {
-      fmt::print("{}", r.name);
-      for (const auto& m : o.metrics) fmt::print(",{:.8g}", r.values.at(m));
+      fmt::print("{}", csvField(r.name));
+      for (const auto& m : o.metrics) fmt::print(",{}", csvNumber(r.values.at(m)));
       fmt::print("\n");
     }
     if (summary) {
       fmt::print("mean");
-      for (const auto& m : o.metrics) fmt::print(",{:.8g}", meanAndStd(rows, m).first);
+      for (const auto& m : o.metrics) fmt::print(",{}", csvNumber(meanAndStd(rows, m).first));
       fmt::print("\n");
     }
   } else {
@@ -272,10 +314,17 @@ void print(const Options& o, const std::vector<Row>& rows) {
   }
 }
 
-int run(const Options& o) {
+int run(const Options& o, int argc, char** argv) {
   auto pairs = pairUp(o);
   if (!o.heatmap.empty() && pairs.size() != 1)
     throw cli::UsageError("--heatmap needs exactly one TEST");
+  std::vector<std::string> inputs;
+  for (const auto& [refPath, testPath, name] : pairs)
+    inputs.push_back(refPath), inputs.push_back(testPath);
+  std::vector<cli::Output> outputs;
+  if (!o.heatmap.empty()) outputs.push_back({o.heatmap, pairs[0][1]});
+  cli::checkFiles(inputs, outputs);
+  cli::setToolProvenance("dnmetrics", argc, argv);
   std::vector<Row> rows;
   std::string loadedRef;  // a shared reference is read once
   Image ref;
@@ -318,8 +367,9 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  removeTemporaryFilesOnSignal("dnmetrics");
   try {
-    return run(parseArgs(argc, argv));
+    return run(parseArgs(argc, argv), argc, argv);
   } catch (const cli::UsageError& e) {
     fmt::print(stderr, "dnmetrics: {}\n", e.what());
   } catch (const std::exception& e) {

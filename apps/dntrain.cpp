@@ -5,6 +5,7 @@
 //   dntrain defaults --model M --respacing 27 --default-skip 18 --default-spp 4 ...  tuned defaults
 #include <fmt/format.h>
 #include <torch/torch.h>
+#include <torch/version.h>
 
 #include <ATen/CPUGeneratorImpl.h>
 
@@ -18,8 +19,10 @@
 #include <optional>
 #include <thread>
 
+#include "common/app.h"
 #include "common/cli.h"
 #include "common/progress.h"
+#include "common/version.h"
 #include "dn/data/training_data.h"
 #include "dn/diffusion/sampler.h"
 #include "dn/infer/denoiser.h"
@@ -27,6 +30,7 @@
 #include "dn/io/buffer_io.h"
 #include "dn/nn/control_module.h"
 #include "dn/nn/oidn_import.h"
+#include "dn/io/output_files.h"
 #include "dn/train/distributed.h"
 #include "dn/train/trainer.h"
 
@@ -72,18 +76,23 @@ options:
   --out FILE            model file written at the end (EMA weights)
   --aux LIST|default|none  control inputs (default: Denoising Data + diffuse/glossy/
                         transmission light passes); none = the radiance-only ablation
-  --steps N             total optimizer steps (default 2000); raise it and --resume to extend
-  --batch N             batch size (default 8)        --crop N  crop size (default 64)
-  --spp LIST            input sample counts (default 4,16,64)
-  --lr X                learning rate (default 2e-4)  --halve-every N  halve lr every N steps
-  --ema X               EMA decay (default 0.999)     --seed N  (default 1)
+  --steps N             total optimizer steps, >= 1 (default 2000); raise it and --resume
+                        to extend
+  --batch N             batch size, 1-1024 (default 8)
+  --crop N              crop size, 16-4096 (default 64)
+  --spp LIST            input sample counts, each >= 1 (default 4,16,64)
+  --lr X                learning rate in (0, 1] (default 2e-4)
+  --halve-every N       halve lr every N steps (default 0: never)
+  --ema X               EMA decay in [0, 1) (default 0.999)     --seed N  >= 0 (default 1)
   --prediction eps|v    network output (default eps)
-  --max-timestep T      draw training timesteps below T only (default: all 1000);
+  --max-timestep T      draw training timesteps below T (0-1000) only (default: all 1000);
                         dndenoise never starts above its largest skip's step
   --render-start P      control: fraction of samples noised from the render itself,
                         at a step that covers its noise, as dndenoise starts (default 0)
-  --base-channels N --res-blocks N   prior size (base only; default: the UNet defaults)
-  --default-skip S      skip stored in the model for dndenoise (default: 18 control, 0 base)
+  --base-channels N --res-blocks N   prior size, 4-1024 and 1-16 (base only; default: the
+                        UNet defaults)
+  --default-skip S      skip stored in the model for dndenoise, 0-999 (default: 18
+                        control, 0 base)
   --respacing SPEC      defaults: steps stored in the model for dndenoise ("27", "super27")
   --default-spp N       defaults: the spp the default skip was tuned at; dndenoise
                         scales skip and mean matching to other spp from it
@@ -102,12 +111,13 @@ options:
   --checkpoint FILE     checkpoint path (default: OUT.ckpt)
   --checkpoint-minutes M  checkpoint interval (default 5)
   --resume              continue from the checkpoint if it exists (same data order)
-  --threads N           CPU threads for the network and the loader
+  --threads N           CPU threads for the network and the loader, 1-1024
   --world-size N --rank R  data-parallel training over N processes (default 1 0):
                         each rank draws its own --batch (global batch N x batch) and
                         gradients are averaged; rank 0 writes log, checkpoint, model
   --master-addr HOST --master-port P  where rank 0 listens (default 127.0.0.1 29500)
                         without these flags: env WORLD_SIZE, RANK, MASTER_ADDR, MASTER_PORT
+  --version             versions of the tool and its libraries
   -h, --help
 Ctrl-C (SIGINT) or SIGTERM saves a checkpoint and exits with code 130.
 )";
@@ -130,6 +140,7 @@ struct Options {
   int threads = 0;
   bool resume = false;
   int worldSize = 1, rank = 0, masterPort = 29500;
+  std::string commandLine;  // recorded in the model files written
   std::string masterAddr = "127.0.0.1";
 };
 
@@ -150,13 +161,24 @@ uint64_t rankSeed(uint64_t seed, int rank) {
   return rank == 0 ? seed : seed + 0x9E3779B97F4A7C15ull * static_cast<uint64_t>(rank);
 }
 
+std::vector<std::string> withModel(std::vector<std::string> files, const std::string& model) {
+  files.push_back(model);
+  return files;
+}
+
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
+  o.commandLine = cli::commandLine(argc, argv);
   distributedDefaultsFromEnvironment(o);
   while (!args.done()) {
     if (args.flag("-h", "--help")) {
       std::fputs(kUsage, stdout);
+      std::exit(cli::kExitOk);
+    } else if (args.flag("--version")) {
+      auto components = cli::commonComponents();
+      components.emplace_back("LibTorch", TORCH_VERSION);
+      std::fputs(cli::versionText("dntrain", components).c_str(), stdout);
       std::exit(cli::kExitOk);
     } else if (args.flag("--data"))
       o.data = args.value("--data");
@@ -171,41 +193,39 @@ Options parseArgs(int argc, char** argv) {
     else if (args.flag("--aux"))
       o.aux = args.value("--aux");
     else if (args.flag("--steps"))
-      o.steps = args.intValue("--steps");
+      o.steps = args.intValue("--steps", 1, INT32_MAX);
     else if (args.flag("--batch"))
-      o.batch = args.intValue("--batch");
+      o.batch = args.intValue("--batch", 1, 1024);
     else if (args.flag("--crop"))
-      o.crop = args.intValue("--crop");
-    else if (args.flag("--spp")) {
-      o.spp.clear();
-      for (const auto& s : cli::splitList(args.value("--spp")))
-        o.spp.push_back(cli::Args::toInt("--spp", s));
-    } else if (args.flag("--lr"))
-      o.lr = args.doubleValue("--lr");
+      o.crop = args.intValue("--crop", 16, 4096);
+    else if (args.flag("--spp"))
+      o.spp = cli::intList("--spp", args.value("--spp"), 1, 1 << 24);
+    else if (args.flag("--lr"))
+      o.lr = args.doubleValue("--lr", 1e-12, 1.0);
     else if (args.flag("--halve-every"))
-      o.halveEvery = args.intValue("--halve-every");
+      o.halveEvery = args.intValue("--halve-every", 0, INT32_MAX);
     else if (args.flag("--ema"))
-      o.ema = args.doubleValue("--ema");
+      o.ema = args.doubleValue("--ema", 0.0, 0.999999);
     else if (args.flag("--seed"))
-      o.seed = static_cast<uint64_t>(args.intValue("--seed"));
+      o.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     else if (args.flag("--max-timestep"))
-      o.maxTimestep = args.intValue("--max-timestep");
+      o.maxTimestep = args.intValue("--max-timestep", 0, 1000);
     else if (args.flag("--render-start"))
-      o.renderStart = args.doubleValue("--render-start");
+      o.renderStart = args.doubleValue("--render-start", 0.0, 1.0);
     else if (args.flag("--prediction"))
       o.prediction = args.value("--prediction");
     else if (args.flag("--base-channels"))
-      o.baseChannels = args.intValue("--base-channels");
+      o.baseChannels = args.intValue("--base-channels", 4, 1024);
     else if (args.flag("--res-blocks"))
-      o.resBlocks = args.intValue("--res-blocks");
+      o.resBlocks = args.intValue("--res-blocks", 1, 16);
     else if (args.flag("--default-skip"))
-      o.defaultSkip = args.intValue("--default-skip");
+      o.defaultSkip = args.intValue("--default-skip", 0, 999);
     else if (args.flag("--exposure-target"))
       o.exposureTarget = args.doubleValue("--exposure-target");
     else if (args.flag("--noise-reference"))
       o.noiseReference.push_back(args.value("--noise-reference"));
     else if (args.flag("--default-spp"))
-      o.defaultSpp = args.intValue("--default-spp");
+      o.defaultSpp = args.intValue("--default-spp", 1, 1 << 24);
     else if (args.flag("--respacing"))
       o.respacing = args.value("--respacing");
     else if (args.flag("--model"))
@@ -215,25 +235,25 @@ Options parseArgs(int argc, char** argv) {
     else if (args.flag("--variant"))
       o.variant = args.value("--variant");
     else if (args.flag("--val-every"))
-      o.valEvery = args.intValue("--val-every");
+      o.valEvery = args.intValue("--val-every", 0, INT32_MAX);
     else if (args.flag("--log"))
       o.log = args.value("--log");
     else if (args.flag("--checkpoint"))
       o.checkpoint = args.value("--checkpoint");
     else if (args.flag("--checkpoint-minutes"))
-      o.checkpointMinutes = args.doubleValue("--checkpoint-minutes");
+      o.checkpointMinutes = args.doubleValue("--checkpoint-minutes", 0.0, 1e6);
     else if (args.flag("--resume"))
       o.resume = true;
     else if (args.flag("--threads"))
-      o.threads = args.intValue("--threads");
+      o.threads = args.intValue("--threads", 1, 1024);
     else if (args.flag("--world-size"))
-      o.worldSize = args.intValue("--world-size");
+      o.worldSize = args.intValue("--world-size", 1, 4096);
     else if (args.flag("--rank"))
-      o.rank = args.intValue("--rank");
+      o.rank = args.intValue("--rank", 0, 4095);
     else if (args.flag("--master-addr"))
       o.masterAddr = args.value("--master-addr");
     else if (args.flag("--master-port"))
-      o.masterPort = args.intValue("--master-port");
+      o.masterPort = args.intValue("--master-port", 1, 65535);
     else if (args.peek().size() > 1 && args.peek()[0] == '-')
       throw cli::UsageError("unknown option '" + args.peek() + "' (see --help)");
     else if (o.mode.empty())
@@ -250,13 +270,14 @@ Options parseArgs(int argc, char** argv) {
           "--noise-reference");
     if (o.exposureTarget != -1.0 && !(o.exposureTarget > 0.0 && o.exposureTarget < 6.0))
       throw cli::UsageError("--exposure-target must be in (0, 6)");
-    if (o.defaultSpp == 0 || o.defaultSpp < -1)
-      throw cli::UsageError("--default-spp must be at least 1");
     if (o.out.empty()) o.out = o.model;
+    // Only the sampling defaults change: rewriting --model in place is the default.
+    cli::checkFiles(withModel(o.noiseReference, o.model), {{o.out, o.model}}, cli::Inplace::Allow);
     return o;
   }
   if (o.mode == "prior") {
     if (o.model.empty() || o.out.empty()) throw cli::UsageError("prior needs --model and --out");
+    cli::checkFiles({o.model}, {{o.out, o.model}});
     return o;
   }
   if (o.mode == "import-oidn") {
@@ -285,8 +306,17 @@ Options parseArgs(int argc, char** argv) {
     throw cli::UsageError("--batch, --crop and --steps must be positive (crop >= 16)");
   if (o.prediction != "eps" && o.prediction != "v")
     throw cli::UsageError("--prediction must be eps or v");
+  if (o.rank >= o.worldSize)
+    throw cli::UsageError(
+        fmt::format("--rank {} must be below --world-size {}", o.rank, o.worldSize));
   if (o.log.empty()) o.log = o.out + ".log.jsonl";
   if (o.checkpoint.empty()) o.checkpoint = o.out + ".ckpt";
+  // Never overwrite the model training starts from; a resumed run rewrites its
+  // own checkpoint, which is not an input here.
+  std::vector<std::string> models;
+  for (const auto& m : {o.base, o.init})
+    if (!m.empty()) models.push_back(m);
+  cli::checkFiles(models, {{o.out, "--out"}, {o.log, "--log"}, {o.checkpoint, "--checkpoint"}});
   return o;
 }
 
@@ -296,6 +326,13 @@ std::vector<std::string> auxBuffers(const std::string& spec) {
   auto list = cli::splitList(spec);
   auxChannelCount(list);  // validates the names
   return list;
+}
+
+// Which tool and command wrote a model file, as image outputs carry it. Not for
+// trained models: a checkpoint resumes only with the notes it was written with.
+void stampProvenance(ModelInfo& info, const Options& o) {
+  info.notes["software"] = fmt::format("dntrain {} ({})", DN_PROJECT_VERSION, DN_GIT_DESCRIBE);
+  info.notes["command"] = o.commandLine;
 }
 
 // The model to train, described by its ModelInfo (training options go in notes,
@@ -445,6 +482,7 @@ int setDefaults(const Options& o) {
     }
     info.notes["noise_reference"] = fmt::format("{:.4f}", sum / o.noiseReference.size());
   }
+  stampProvenance(info, o);
   auto& skip = info.notes["default_skip"];
   if (skip.empty()) skip = "0";
   try {
@@ -473,6 +511,7 @@ int extractPrior(const Options& o) {
   info.has_control = false;
   info.input_buffers.clear();
   info.notes["extracted_from"] = fs::path(o.model).filename().string();
+  stampProvenance(info, o);
   saveModelFile(o.out, info, PriorDenoiser(loaded.prior()));
   fmt::print(stderr, "dntrain: {}: the prior of {}\n", o.out, o.model);
   return cli::kExitOk;
@@ -601,6 +640,7 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  removeTemporaryFilesOnSignal("dntrain");  // training replaces it with a checkpoint handler
   try {
     return run(parseArgs(argc, argv));
   } catch (const std::exception& e) {

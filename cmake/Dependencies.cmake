@@ -2,6 +2,7 @@
 find_package(PkgConfig REQUIRED)
 find_package(Threads REQUIRED)
 find_package(fmt REQUIRED)
+find_package(nlohmann_json 3 REQUIRED)  # Debian: nlohmann-json3-dev
 
 # Debian's OpenImageIO and OpenColorIO CMake configs carry broken include
 # paths; their pkg-config files give clean imported targets.

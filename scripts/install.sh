@@ -11,7 +11,8 @@ sudo_if_needed() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
 packages=(build-essential cmake ninja-build pkg-config git
           libtorch-dev libopenimageio-dev openimageio-tools libopenexr-dev
-          libopencolorio-dev libfmt-dev doctest-dev libgloo-dev python3 python3-pip)
+          libopencolorio-dev libfmt-dev doctest-dev libgloo-dev nlohmann-json3-dev
+          python3 python3-pip)
 [ "${DN_SKIP_BLENDER:-0}" = 1 ] || packages+=(blender mate-backgrounds)  # scene generator + its textures
 
 missing=()

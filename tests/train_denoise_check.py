@@ -206,7 +206,7 @@ def main():
     os.makedirs(seq_in)
     for i in (1, 2):
         shutil.copy(frame, os.path.join(seq_in, f"shot.{i:04d}.exr"))
-    out = run(base_cmd + [os.path.join(seq_in, "shot.####.exr"), "-o", os.path.join(seq_in, "out.%04d.exr")])
+    out = run(base_cmd + [os.path.join(seq_in, "shot.#.exr"), "-o", os.path.join(seq_in, "out.%04d.exr")])
     check("frame sequences", out.returncode == 0 and all(
         os.path.exists(os.path.join(seq_in, f"out.{i:04d}.exr")) for i in (1, 2)), out.stderr)
 

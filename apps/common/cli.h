@@ -2,6 +2,8 @@
 // "--opt=value" forms, typed conversions with one-line errors, and exit codes.
 #pragma once
 
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <optional>
 #include <stdexcept>
@@ -56,6 +58,13 @@ class Args {
   }
   int intValue(const std::string& option) { return toInt(option, value(option)); }
   double doubleValue(const std::string& option) { return toDouble(option, value(option)); }
+  // The same, refused with one line outside [lo, hi].
+  int intValue(const std::string& option, int lo, int hi) {
+    return inRange(option, intValue(option), lo, hi);
+  }
+  double doubleValue(const std::string& option, double lo, double hi) {
+    return inRange(option, doubleValue(option), lo, hi);
+  }
 
   std::string positional() { return args_[pos_++]; }
 
@@ -68,17 +77,33 @@ class Args {
     }
     throw UsageError(option + ": '" + text + "' is not an integer");
   }
+  // Finite numbers only: "inf" and "nan" would reach the output as non-finite pixels.
   static double toDouble(const std::string& option, const std::string& text) {
+    double v = 0;
     try {
       std::size_t used = 0;
-      double v = std::stod(text, &used);
-      if (used == text.size()) return v;
+      v = std::stod(text, &used);
+      if (used != text.size()) v = NAN;
     } catch (const std::exception&) {
+      v = NAN;
     }
-    throw UsageError(option + ": '" + text + "' is not a number");
+    if (std::isfinite(v)) return v;
+    throw UsageError(option + ": '" + text + "' is not a finite number");
+  }
+  template <class T>
+  static T inRange(const std::string& option, T v, T lo, T hi) {
+    if (v >= lo && v <= hi) return v;
+    throw UsageError(option + " must be between " + numberText(lo) + " and " + numberText(hi) +
+                     ", got " + numberText(v));
   }
 
  private:
+  static std::string numberText(int v) { return std::to_string(v); }
+  static std::string numberText(double v) {  // 1e-12, 0.5, 1e+06
+    char text[32];
+    std::snprintf(text, sizeof text, "%g", v);
+    return text;
+  }
   std::vector<std::string> args_;
   std::size_t pos_ = 0;
   std::optional<std::string> pending_;
@@ -93,6 +118,16 @@ inline std::vector<std::string> splitList(const std::string& text, char sep = ',
     if (end > start) out.push_back(text.substr(start, end - start));
     start = end + 1;
   }
+  return out;
+}
+
+// A list of integers "4,16,64", each in [lo, hi]; an empty list is refused.
+inline std::vector<int> intList(const std::string& option, const std::string& text, int lo,
+                                int hi) {
+  std::vector<int> out;
+  for (const auto& item : splitList(text))
+    out.push_back(Args::inRange(option, Args::toInt(option, item), lo, hi));
+  if (out.empty()) throw UsageError(option + " needs a comma-separated list of numbers");
   return out;
 }
 

@@ -1,4 +1,5 @@
 #include "dn/io/buffer_io.h"
+#include "dn/io/output_files.h"
 
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
@@ -294,15 +295,31 @@ void writeAtomically(const std::string& path, WriteFn&& write) {
   fs::path parent = fs::path(path).parent_path();
   if (!parent.empty() && !fs::is_directory(parent, ec)) fail(path, "output folder does not exist");
   const std::string tmp = temporaryPathFor(path);
+  trackTemporaryFile(tmp);  // a SIGTERM handler removes it (dn/io/output_files.h)
   try {
     write(tmp);
     fs::rename(tmp, path);
   } catch (const fs::filesystem_error& e) {
     fs::remove(tmp, ec);
+    untrackTemporaryFile(tmp);
     fail(path, std::string("cannot write (") + e.code().message() + ")");
   } catch (...) {
     fs::remove(tmp, ec);
+    untrackTemporaryFile(tmp);
     throw;
+  }
+  untrackTemporaryFile(tmp);
+}
+
+// The process's provenance (dn/io/output_files.h); ImageHistory grows by a line.
+void addProvenance(OIIO::ImageSpec& spec) {
+  for (const auto& [name, value] : provenance()) {
+    std::string text = value;
+    if (name == "ImageHistory") {
+      const std::string before = spec.get_string_attribute("ImageHistory");
+      if (!before.empty()) text = before + "\n" + value;
+    }
+    spec.attribute(name, text);
   }
 }
 
@@ -703,6 +720,7 @@ void writePlain(const std::string& path, const Image& image, PixelType type,
         spec.full_x = display.x, spec.full_y = display.y, spec.full_width = display.width,
         spec.full_height = display.height;
     }
+    addProvenance(spec);
     if (!out->open(tmp, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data()) ||
         !out->close())
       fail(path, "write failed (" + firstLine(out->geterror()) + ")");
@@ -916,7 +934,8 @@ void writeResult(const std::string& sourcePath, const std::string& outPath, cons
   const PixelWindow window = dataWindowOf(table.parts[anchor].spec);
   const auto added = addedLayers(result, options, window, outPath, sourcePath);
   const OIIO::TypeDesc resultType = options.half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT;
-  const std::vector<OutputPart> parts = planOutputParts(table, added, anchor, resultType);
+  std::vector<OutputPart> parts = planOutputParts(table, added, anchor, resultType);
+  for (OutputPart& part : parts) addProvenance(part.spec);
 
   writeAtomically(outPath, [&](const std::string& tmp) {
     auto out = createOutput(tmp, outPath);
