@@ -421,6 +421,18 @@ void checkModelInputs(const Denoiser& denoiser, const std::string& name,
       name, needs, hasList));
 }
 
+// The names in `available` that --buffers allows (all when it is not given).
+std::vector<std::string> allowed(const Options& o, std::vector<std::string> available) {
+  if (o.buffers.empty()) return available;
+  available.erase(std::remove_if(available.begin(), available.end(),
+                                 [&](const std::string& b) {
+                                   return std::find(o.buffers.begin(), o.buffers.end(), b) ==
+                                          o.buffers.end();
+                                 }),
+                  available.end());
+  return available;
+}
+
 // What to read of `input`, from its header: the colour and the buffers the model
 // needs (one line naming what it lacks).
 ReadOptions readInputHeader(const Options& o, const Denoiser& denoiser, const std::string& input) {
@@ -437,18 +449,6 @@ ReadOptions readInputHeader(const Options& o, const Denoiser& denoiser, const st
 // Only the buffers the model reads: the file's other layers are copied from it
 // when the result is written, and holding them as float would cost 1.5 GB on a
 // 4K frame with all of Cycles' passes.
-// The names in `available` that --buffers allows (all when it is not given).
-std::vector<std::string> allowed(const Options& o, std::vector<std::string> available) {
-  if (o.buffers.empty()) return available;
-  available.erase(std::remove_if(available.begin(), available.end(),
-                                 [&](const std::string& b) {
-                                   return std::find(o.buffers.begin(), o.buffers.end(), b) ==
-                                          o.buffers.end();
-                                 }),
-                  available.end());
-  return available;
-}
-
 FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::string& input,
                        const std::string& name) {
   if (input.empty()) {
@@ -479,8 +479,6 @@ int run(Options o, int argc, char** argv) {
   auto jobs = planJobs(o);
   const std::vector<std::string> previews = planPreviews(o, jobs);
   const std::optional<tonemap::OcioDisplay> display = displayFor(o, jobs);
-}
-
   checkFilesBeforeWork(o, jobs, previews);
   const auto loadStart = Clock::now();
   Denoiser denoiser = [&] {

@@ -12,6 +12,7 @@ sudo_if_needed() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 packages=(build-essential cmake ninja-build pkg-config git
           libtorch-dev libopenimageio-dev openimageio-tools libopenexr-dev
           libopencolorio-dev libfmt-dev doctest-dev libgloo-dev nlohmann-json3-dev
+          blender-data  # Blender's OpenColorIO config (Filmic), for display pictures and their tests
           python3 python3-pip)
 [ "${DN_SKIP_BLENDER:-0}" = 1 ] || packages+=(blender mate-backgrounds)  # scene generator + its textures
 

@@ -138,7 +138,7 @@ def main():
         out = run([dndenoise, "--ocio", BLENDER_CONFIG, "--list-views"], env=env)
         check("--list-views lists Blender's views", out.returncode == 0 and "sRGB / Filmic" in out.stdout, out.stdout)
     else:
-        print(f"note: {BLENDER_CONFIG} not found (Blender not installed): Filmic checks skipped")
+        print(f"note: {BLENDER_CONFIG} not found (Debian package blender-data, which scripts/install.sh installs): Filmic checks skipped")
 
     # A frame sequence with a preview per frame.
     for n in (1, 2):

@@ -11,6 +11,7 @@
 #include "common/version.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
+#include "dn/io/sha256.h"
 
 namespace fs = std::filesystem;
 

@@ -23,8 +23,6 @@ std::string commandLine(int argc, char** argv);
 void setToolProvenance(const std::string& tool, int argc, char** argv,
                        const std::string& model = "");
 
-std::string sha256OfFile(const std::string& path);
-
 // $DN_MODEL, else default.dnm in $DN_MODEL_DIR, beside the build tree's
 // executables (<exe dir>/../models) or in the install tree
 // (<exe dir>/../share/<project>/models). Throws an IoError naming the places
