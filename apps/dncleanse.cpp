@@ -17,9 +17,8 @@
 
 #include "common/app.h"
 #include "common/cli.h"
-#include "common/progress.h"
-#include "dn/io/buffer_io.h"
 #include "common/finite.h"
+#include "common/progress.h"
 #include "common/version.h"
 #include "dn/data/dataset.h"
 #include "dn/infer/model_inputs.h"

@@ -2,7 +2,7 @@
 // renderer's feature buffers.
 //   dndenoise IN.exr -o OUT.exr
 //   dndenoise --color c.pfm --albedo a.pfm --normal n.pfm ... -o OUT.exr
-//   dndenoise shot.####.exr -o out.####.exr
+//   dndenoise shot.#.exr -o out.#.exr
 #include <fmt/format.h>
 #include <torch/torch.h>
 #include <torch/version.h>
@@ -19,13 +19,13 @@
 
 #include "common/app.h"
 #include "common/cli.h"
+#include "common/finite.h"
 #include "common/progress.h"
 #include "common/sequence.h"
-#include "dn/io/preview_io.h"
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
-#include "common/finite.h"
 #include "dn/io/output_files.h"
+#include "dn/io/preview_io.h"
 #include "dn/metrics.h"
 #include "dn/parallel.h"
 

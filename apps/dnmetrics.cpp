@@ -17,7 +17,6 @@
 #include "common/app.h"
 #include "common/cli.h"
 #include "common/progress.h"
-#include "dn/io/buffer_io.h"
 #include "dn/flip.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"

@@ -28,9 +28,9 @@
 #include "dn/infer/denoiser.h"
 #include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
+#include "dn/io/output_files.h"
 #include "dn/nn/control_module.h"
 #include "dn/nn/oidn_import.h"
-#include "dn/io/output_files.h"
 #include "dn/train/distributed.h"
 #include "dn/train/trainer.h"
 

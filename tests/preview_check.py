@@ -145,12 +145,12 @@ def main():
         shutil.copy(frame, p(f"shot.{n:04d}.exr"))
     os.makedirs(p("seq"))
     os.makedirs(p("prev"))
-    out = run(denoise + [p("shot.####.exr"), "-o", p("seq", "out.####.exr"), "--preview", p("prev")], env=env)
+    out = run(denoise + [p("shot.#.exr"), "-o", p("seq", "out.#.exr"), "--preview", p("prev")], env=env)
     made = sorted(os.listdir(p("seq"))) + sorted(os.listdir(p("prev")))
     check("a sequence gets an EXR and a preview per frame", out.returncode == 0 and made == [
         "out.0001.exr", "out.0002.exr", "out.0001.png", "out.0002.png"], f"{made} {out.stderr}")
     expect_error("--preview of one file for a sequence",
-                 denoise + [p("shot.####.exr"), "-o", p("seq", "again.####.exr"), "--preview", p("one.png")],
+                 denoise + [p("shot.#.exr"), "-o", p("seq", "again.#.exr"), "--preview", p("one.png")],
                  "--preview: several outputs need an existing folder", p("seq", "again.0001.exr"))
 
     # Wrong names fail at once, before any denoising, with nothing written.

@@ -35,8 +35,7 @@ FrameBuffers keepOnly(FrameBuffers frame, const std::vector<std::string>& buffer
 }  // namespace
 
 TEST_CASE("Blender 5 and Mitsuba renders denoise with every buffer set") {
-  const Denoiser denoiser =
-      Denoiser::fromFile(std::string(DN_SOURCE_DIR) + "/models/default.dnm");
+  const Denoiser denoiser = Denoiser::fromFile(std::string(DN_SOURCE_DIR) + "/models/default.dnm");
   const std::vector<std::vector<std::string>> sets = {
       {"color"}, {"color", "albedo"}, {"color", "albedo", "normal"}};
   for (const std::string scene : {"blender5_hdri", "mitsuba_box_matpreview"}) {
@@ -58,7 +57,7 @@ TEST_CASE("Blender 5 and Mitsuba renders denoise with every buffer set") {
 
 TEST_CASE("a Blender 5 file holds every light pass under its full name") {
   const auto buffers = availableBuffers(kDir + "blender5_hdri_4spp.exr");
-  for (const char* name : {"color", "albedo", "normal", "depth", "diffuse_direct", "glossy_indirect",
-                           "transmission_color"})
+  for (const char* name : {"color", "albedo", "normal", "depth", "diffuse_direct",
+                           "glossy_indirect", "transmission_color"})
     CHECK(std::find(buffers.begin(), buffers.end(), name) != buffers.end());
 }

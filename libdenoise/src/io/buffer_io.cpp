@@ -921,9 +921,8 @@ void writeResult(const std::string& sourcePath, const std::string& outPath, cons
   if (!allowOverwriteSource && fs::exists(outPath, ec) && fs::equivalent(sourcePath, outPath, ec))
     fail(outPath, "is the input file; refusing to overwrite it (use --inplace)");
   if (options.rgbOnly) {
-    writePlain(outPath, result, options.half ? PixelType::Half : PixelType::Float,
-               {"R", "G", "B"}, options.dataWindow,
-               options.displayWindow);
+    writePlain(outPath, result, options.half ? PixelType::Half : PixelType::Float, {"R", "G", "B"},
+               options.dataWindow, options.displayWindow);
     return;
   }
 
