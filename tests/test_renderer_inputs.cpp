@@ -7,7 +7,7 @@
 
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
-#include "dn/tonemap.h"
+#include "dn/metrics.h"
 
 using namespace dn;
 
@@ -15,14 +15,9 @@ namespace {
 
 const std::string kDir = std::string(DN_TESTDATA) + "/renderers/";
 
+// PSNR (dB) of `a` against `b` after the Reinhard tonemap, as dnmetrics reports it.
 double reinhardPsnr(const Image& a, const Image& b) {
-  double sum = 0.0;
-  for (size_t i = 0; i < a.pixels.size(); ++i) {
-    const double d = tonemap::reinhard(std::max(a.pixels[i], 0.0f)) -
-                     tonemap::reinhard(std::max(b.pixels[i], 0.0f));
-    sum += d * d;
-  }
-  return 10.0 * std::log10(1.0 / (sum / a.pixels.size()));
+  return metrics::compare(b, a, {"psnr"}).values.at("psnr");
 }
 
 // The frame with only `buffers` kept.
