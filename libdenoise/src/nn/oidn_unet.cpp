@@ -105,20 +105,32 @@ torch::Tensor OidnUNetImpl::conv(const std::string& name, const torch::Tensor& x
 }
 
 torch::Tensor OidnUNetImpl::forward(const torch::Tensor& input, const ControlResiduals* residuals) {
-  // Skips, fine to coarse: the input, then every pooled level but the last,
-  // which only feeds the bottleneck.
-  std::vector<torch::Tensor> skips = {input};
+  return decode(encode(input), residuals);
+}
+
+OidnUNetImpl::Features OidnUNetImpl::encode(const torch::Tensor& input) {
+  // Skips: the input, then every pooled level but the last, which only feeds
+  // the bottleneck.
+  Features f;
+  f.skips = {input};
   torch::Tensor x = input;
   for (const auto& level : encoder_) {
     for (const auto& name : level) x = conv(name, x);
     x = torch::max_pool2d(x, 2, 2);
-    skips.push_back(x);
+    f.skips.push_back(x);
   }
-  skips.pop_back();
+  f.skips.pop_back();
+  std::reverse(f.skips.begin(), f.skips.end());
   for (const auto& name : bottleneck_) x = conv(name, x);
+  f.bottleneck = x;
+  return f;
+}
+
+torch::Tensor OidnUNetImpl::decode(const Features& features, const ControlResiduals* residuals) {
+  torch::Tensor x = features.bottleneck;
   if (residuals) x = x + residuals->middle;
   for (size_t level = 0; level < decoder_.size(); ++level) {
-    torch::Tensor skip = skips[skips.size() - 1 - level];
+    torch::Tensor skip = features.skips[level];
     if (residuals) skip = skip + residuals->skips[level];
     x = torch::cat({torch::upsample_nearest2d(x, {x.size(2) * 2, x.size(3) * 2}), skip}, 1);
     for (const auto& name : decoder_[level]) x = conv(name, x);

@@ -48,6 +48,15 @@ class OidnUNetImpl : public torch::nn::Module {
   // bottleneck output: where a Control Module steers the network.
   torch::Tensor forward(const torch::Tensor& input, const ControlResiduals* residuals = nullptr);
 
+  // The two halves of forward, so that a Control Module can run the frozen
+  // encoder once and the decoder once per diffusion step.
+  struct Features {
+    std::vector<torch::Tensor> skips;  // decoder order: coarse to fine, the input last
+    torch::Tensor bottleneck;
+  };
+  Features encode(const torch::Tensor& input);
+  torch::Tensor decode(const Features& features, const ControlResiduals* residuals = nullptr);
+
   // Channels of the decoder's skip inputs (coarse to fine, the input last) and
   // of the bottleneck output: the shapes ControlResiduals must have.
   std::vector<int64_t> skipChannels() const;
