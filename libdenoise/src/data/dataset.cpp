@@ -41,22 +41,34 @@ std::string stackPath(const std::string& dir, int spp, int k) {
   return (fs::path(dir) / name).string();
 }
 
-// Colour plus the requested aux buffers of one file, aux concatenated.
+// Colour plus the requested aux buffers of one file, aux concatenated; with
+// `present`, missing aux buffers are zeros and flagged 0 there.
 std::pair<Image, Image> readColorAndAux(const std::string& path,
-                                        const std::vector<std::string>& aux) {
+                                        const std::vector<std::string>& aux,
+                                        std::vector<float>* present = nullptr) {
   ReadOptions options;
   options.only = aux;
   options.only.insert(options.only.begin(), "color");
   FrameBuffers frame = readFrame(path, options);
   int channels = 0;
-  for (const auto& name : aux) channels += frame.get(name).channels;
+  for (const auto& name : aux) channels += findBufferSpec(name)->channels;
   Image auxImage(frame.width, frame.height, channels);
+  if (present) present->clear();
   int offset = 0;
   for (const auto& name : aux) {
-    const Image& b = frame.get(name);
-    for (std::size_t i = 0; i < b.pixelCount(); ++i)
-      std::copy_n(&b.pixels[i * b.channels], b.channels, &auxImage.pixels[i * channels + offset]);
-    offset += b.channels;
+    const int c = findBufferSpec(name)->channels;
+    const bool has = frame.has(name);
+    if (present) present->push_back(has ? 1.0f : 0.0f);
+    if (has) {
+      const Image& b = frame.get(name);
+      for (std::size_t i = 0; i < b.pixelCount(); ++i)
+        for (int k = 0; k < c; ++k)
+          auxImage.pixels[i * channels + offset + k] =
+              b.pixels[i * b.channels + std::min(k, b.channels - 1)];
+    } else if (!present) {
+      frame.get(name);  // throws, naming the buffer
+    }
+    offset += c;
   }
   return {frame.get("color"), std::move(auxImage)};
 }
@@ -168,7 +180,8 @@ std::shared_ptr<const FrameData> FrameData::load(const FrameRecord& record,
                     std::to_string(record.stackSpp) + " spp, the frame has " +
                     std::to_string(record.stacks));
     for (int k = 0; k < record.stacks; ++k) {
-      auto [color, aux] = readColorAndAux(stackPath(record.dir, record.stackSpp, k), options.aux);
+      auto [color, aux] = readColorAndAux(stackPath(record.dir, record.stackSpp, k), options.aux,
+                                          options.missingAuxAsZero ? &data->present_ : nullptr);
       data->stackColor_.push_back(std::move(color));
       data->stackAux_.push_back(std::move(aux));
     }
@@ -200,6 +213,7 @@ Sample FrameData::draw(std::mt19937_64& rng, const SampleOptions& options) const
   const int x0 = uniform(width_ - w + 1), y0 = uniform(height_ - h + 1);
 
   Sample s;
+  s.present = present_;
   if (options.task == Task::Clean) {
     s.target = crop(target_, x0, y0, w, h);
     s.color = s.target;
@@ -355,6 +369,7 @@ Batch Loader::next() {
     toPlanar(s.aux, batch.aux);
     toPlanar(s.target, batch.target);
     batch.spp.push_back(s.spp);
+    batch.present.insert(batch.present.end(), s.present.begin(), s.present.end());
   }
   return batch;
 }

@@ -27,9 +27,9 @@ torch::Tensor applyCurve(const torch::Tensor& v, tonemap::Curve curve) {
   throw std::invalid_argument("unsupported radiance curve for the model");
 }
 
-enum class AuxKind { Radiance, Unit, Normal, Depth, Variance };
+}  // namespace
 
-AuxKind kindOf(const std::string& name) {
+AuxKind auxKind(const std::string& name) {
   if (name == "normal") return AuxKind::Normal;
   if (name == "depth") return AuxKind::Depth;
   if (name == "color_variance") return AuxKind::Variance;
@@ -39,7 +39,9 @@ AuxKind kindOf(const std::string& name) {
   return AuxKind::Radiance;  // direct/indirect light, emission, environment
 }
 
-}  // namespace
+torch::Tensor normalizedDepth(const torch::Tensor& depth) {
+  return torch::log1p(depth.clamp(0.0, kDepthRange)) / std::log1p(kDepthRange);
+}
 
 torch::Tensor tonemapRadiance(const torch::Tensor& radiance, tonemap::Curve curve) {
   return applyCurve(torch::nan_to_num(radiance, 0.0, 0.0, 0.0).clamp(0.0, tonemap::kHdrMax), curve);
@@ -87,7 +89,7 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
     const int64_t channels = findBufferSpec(name)->channels;
     torch::Tensor x = clean.narrow(1, offset, channels);
     offset += channels;
-    switch (kindOf(name)) {
+    switch (auxKind(name)) {
       case AuxKind::Radiance:
         parts.push_back(tonemapRadiance(x, curve));
         break;
@@ -98,7 +100,7 @@ torch::Tensor normalizeAux(const torch::Tensor& aux, const std::vector<std::stri
         parts.push_back(x.clamp(-1.0, 1.0));
         break;
       case AuxKind::Depth:
-        parts.push_back(torch::log1p(x.clamp(0.0, kDepthRange)) / std::log1p(kDepthRange));
+        parts.push_back(normalizedDepth(x));
         break;
       case AuxKind::Variance:
         parts.push_back(0.1 * torch::log1p(x.clamp_min(0.0)));
@@ -125,8 +127,8 @@ torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,
   std::vector<torch::Tensor> parts;
   for (const auto& name : buffers) {
     auto part = imageRegionToTensor(frame.get(name), y0, x0, height, width);
-    if (exposure != 1.0 && kindOf(name) == AuxKind::Radiance) part.mul_(exposure);
-    if (exposure != 1.0 && kindOf(name) == AuxKind::Variance) part.mul_(exposure * exposure);
+    if (exposure != 1.0 && auxKind(name) == AuxKind::Radiance) part.mul_(exposure);
+    if (exposure != 1.0 && auxKind(name) == AuxKind::Variance) part.mul_(exposure * exposure);
     parts.push_back(part);
   }
   return normalizeAux(torch::cat(parts, 1), buffers, curve);

@@ -1,5 +1,6 @@
 #include "dn/nn/model_file.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -8,6 +9,7 @@
 #include <random>
 #include <sstream>
 
+#include "dn/diffusion/refine.h"
 #include "dn/tonemap.h"
 
 namespace dn {
@@ -170,7 +172,20 @@ std::string oidnInfoToText(const ModelInfo& info) {
   out << "base=oidn\n"
       << "oidn.arch=" << oidnArchName(info.oidn.arch) << "\n"
       << "oidn.input_sets=" << joinStrings(info.oidn.input_sets) << "\n"
-      << "input_buffers=" << joinStrings(info.input_buffers) << "\n";
+      << "input_buffers=" << joinStrings(info.input_buffers) << "\n"
+      << "control=" << (info.has_control ? 1 : 0) << "\n";
+  if (info.has_control) {
+    const OidnControlConfig& c = info.oidn.control;
+    std::ostringstream sigmas;
+    sigmas << std::setprecision(9);
+    for (size_t i = 0; i < info.oidn.sigmas.size(); ++i)
+      sigmas << (i ? "," : "") << info.oidn.sigmas[i];
+    out << "control.input_set=" << c.input_set << "\n"
+        << "control.extra_buffers=" << joinStrings(c.extra_buffers) << "\n"
+        << "control.hint_channels=" << c.hint_channels << "\n"
+        << "control.diffusion=" << (c.diffusion ? 1 : 0) << "\n"
+        << "control.sigmas=" << sigmas.str() << "\n";
+  }
   return out.str();
 }
 
@@ -185,8 +200,26 @@ void oidnInfoFromText(const KeyValues& kv, ModelInfo& info) {
     kv.fail(error.what());
   }
   info.input_buffers = splitList(kv.text("input_buffers"));
-  info.has_control = false;
+  info.has_control = kv.has("control") && kv.integer("control") != 0;
   info.objective = Objective::Regression;
+  if (!info.has_control) return;
+  OidnControlConfig& c = info.oidn.control;
+  c.input_set = kv.text("control.input_set");
+  c.extra_buffers = splitList(kv.text("control.extra_buffers"));
+  c.hint_channels = kv.integer("control.hint_channels");
+  c.diffusion = kv.integer("control.diffusion") != 0;
+  try {
+    for (const auto& s : splitList(kv.text("control.sigmas")))
+      info.oidn.sigmas.push_back(std::stod(s));
+    c.validate();
+    checkSigmas(info.oidn.sigmas);
+    if (std::find(info.oidn.input_sets.begin(), info.oidn.input_sets.end(), c.input_set) ==
+        info.oidn.input_sets.end())
+      throw std::invalid_argument("control.input_set is not among oidn.input_sets");
+  } catch (const std::logic_error& error) {  // std::stod's and validate()'s
+    kv.fail(error.what());
+  }
+  if (c.diffusion) info.objective = Objective::Diffusion;
 }
 
 void diffusionInfoFromText(const KeyValues& kv, ModelInfo& info) {
@@ -402,6 +435,12 @@ LoadedModel loadModelFile(const std::string& path) {
   loaded.info = modelInfoFromText(file.text, path);
   if (loaded.info.base_kind == BaseKind::Oidn) {
     loaded.oidn = OidnBase(loaded.info.oidn.arch, loaded.info.oidn.input_sets);
+    if (loaded.info.has_control) {
+      loaded.oidnControlled = OidnControlled(loaded.oidn, loaded.info.oidn.control);
+      loadModuleWeights(*loaded.oidnControlled, file.archive, path);
+      loaded.oidnControlled->eval();
+      return loaded;
+    }
     loadModuleWeights(*loaded.oidn, file.archive, path);
     loaded.oidn->eval();
     return loaded;

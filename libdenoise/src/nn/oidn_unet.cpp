@@ -77,10 +77,12 @@ std::vector<OidnConv> oidnConvs(const OidnUNetConfig& c) {
 OidnUNetImpl::OidnUNetImpl(const OidnUNetConfig& config) : config_(config) {
   if (config.in_channels < 1 || config.out_channels < 1)
     throw std::invalid_argument("OIDN network needs at least one input and output channel");
-  for (const OidnConv& c : oidnConvs(config))
+  for (const OidnConv& c : oidnConvs(config)) {
+    if (config.encoder_only && c.name.rfind("enc_", 0) != 0) continue;
     convs_.emplace(
         c.name, register_module(c.name, torch::nn::Conv2d(
                                             torch::nn::Conv2dOptions(c.in, c.out, 3).padding(1))));
+  }
   if (config.arch == OidnArch::Large) {
     encoder_ = {{"enc_conv1a", "enc_conv1b"},
                 {"enc_conv2a", "enc_conv2b"},
@@ -127,6 +129,7 @@ OidnUNetImpl::Features OidnUNetImpl::encode(const torch::Tensor& input) {
 }
 
 torch::Tensor OidnUNetImpl::decode(const Features& features, const ControlResiduals* residuals) {
+  if (config_.encoder_only) throw std::logic_error("an encoder-only OIDN network has no decoder");
   torch::Tensor x = features.bottleneck;
   if (residuals) x = x + residuals->middle;
   for (size_t level = 0; level < decoder_.size(); ++level) {

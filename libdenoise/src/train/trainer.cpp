@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "dn/diffusion/sampler.h"
+#include "dn/train/control_loss.h"
 
 namespace dn {
 namespace {
@@ -86,12 +87,23 @@ torch::Tensor regressionLoss(ConditionalDenoiser& model, const TrainBatch& batch
 }
 
 Trainer::Trainer(std::shared_ptr<ConditionalDenoiser> model, ModelInfo info, TrainerOptions options)
-    : model_(std::move(model)),
+    : Trainer(model, std::move(info), options, 0) {
+  model_ = std::move(model);
+}
+
+Trainer::Trainer(OidnControlled model, ModelInfo info, TrainerOptions options)
+    : Trainer(model.ptr(), std::move(info), options, 0) {
+  controlled_ = std::move(model);
+}
+
+Trainer::Trainer(std::shared_ptr<torch::nn::Module> module, ModelInfo info, TrainerOptions options,
+                 int)
+    : module_(std::move(module)),
       info_(std::move(info)),
       options_(options),
       schedule_(info_.trainingSchedule()),
       generator_(at::detail::createCPUGenerator(options.seed)) {
-  for (auto& parameter : model_->parameters())
+  for (auto& parameter : module_->parameters())
     if (parameter.requires_grad()) trainable_.push_back(parameter);
   TORCH_CHECK(!trainable_.empty(), "the model has no trainable parameters");
   for (auto& parameter : trainable_) ema_.push_back(parameter.detach().clone());
@@ -106,7 +118,7 @@ double Trainer::currentLearningRate() const {
 }
 
 StepStats Trainer::step(const TrainBatch& batch) {
-  model_->train();
+  module_->train();
   const double lr = currentLearningRate();
   for (auto& group : optimizer_->param_groups())
     static_cast<torch::optim::AdamWOptions&>(group.options()).lr(lr);
@@ -147,18 +159,19 @@ void Trainer::setGradientAverager(std::shared_ptr<GradientAverager> averager) {
                  : ", another rank is not") +
         " (resume needs the same checkpoint on every rank)");
   // Frozen weights included, so every rank runs the same network.
-  averager_->broadcastParameters(model_->parameters());
+  averager_->broadcastParameters(module_->parameters());
   averager_->broadcastParameters(ema_);
 }
 
 double Trainer::evaluate(const TrainBatch& batch, uint64_t seed) {
   torch::NoGradGuard no_grad;
-  model_->eval();
+  module_->eval();
   auto generator = at::detail::createCPUGenerator(seed);
   return loss(batch, generator).item<double>();
 }
 
 torch::Tensor Trainer::loss(const TrainBatch& batch, torch::Generator& generator) {
+  if (controlled_) return controlLoss(*controlled_, info_, batch, generator);
   if (info_.objective == Objective::Regression) return regressionLoss(*model_, batch);
   return diffusionLoss(*model_, schedule_, info_.prediction, batch, generator, options_.diffusion);
 }
@@ -182,7 +195,7 @@ void Trainer::swapEma() {
 void Trainer::saveEmaModel(const std::string& path) {
   swapEma();
   try {
-    saveModelFile(path, info_, *model_);
+    saveModelFile(path, info_, *module_);
   } catch (...) {
     swapEma();
     throw;
@@ -192,7 +205,7 @@ void Trainer::saveEmaModel(const std::string& path) {
 
 void Trainer::saveCheckpoint(const std::string& path) {
   torch::serialize::OutputArchive archive, model_archive, optimizer_archive, ema_archive;
-  model_->save(model_archive);
+  module_->save(model_archive);
   optimizer_->save(optimizer_archive);
   for (size_t i = 0; i < ema_.size(); ++i) ema_archive.write(std::to_string(i), ema_[i]);
   archive.write("model", model_archive);
@@ -211,7 +224,7 @@ void Trainer::loadCheckpoint(const std::string& path) {
   try {
     torch::serialize::InputArchive model_archive, optimizer_archive, ema_archive;
     file.archive.read("model", model_archive);
-    loadModuleWeights(*model_, model_archive, path);
+    loadModuleWeights(*module_, model_archive, path);
     file.archive.read("optimizer", optimizer_archive);
     optimizer_->load(optimizer_archive);
     file.archive.read("ema", ema_archive);

@@ -43,6 +43,9 @@ struct SampleOptions {
   std::vector<std::string> aux;        // canonical buffer names, concatenated in this order
   int crop = 64;                       // square crop size; 0 keeps the whole frame
   bool augment = true;                 // random flips and 90-degree rotations
+  // Aux buffers a frame lacks are zero (Sample::present says which) instead of
+  // an error: renderers write different passes.
+  bool missingAuxAsZero = false;
 };
 
 // Dihedral transform of an image: transpose, then horizontal and vertical flips.
@@ -63,6 +66,7 @@ struct Sample {
   Image aux;     // the aux buffers concatenated (may have 0 channels)
   Image target;  // linear HDR, 3 channels
   int spp = 0;
+  std::vector<float> present;  // per aux buffer: 1 in the frame's files, 0 filled with zeros
 };
 
 // All buffers of one frame that samples need, decoded once and cached.
@@ -78,6 +82,7 @@ class FrameData {
 
  private:
   int width_ = 0, height_ = 0, stackSpp_ = 0;
+  std::vector<float> present_;
   std::vector<Image> stackColor_, stackAux_;  // per stack
   Image gtAColor_, gtAAux_, gtBColor_, gtBAux_, target_;
 };
@@ -87,6 +92,7 @@ struct Batch {
   int size = 0, height = 0, width = 0, auxChannels = 0;
   std::vector<float> color, aux, target;
   std::vector<int> spp;
+  std::vector<float> present;  // (N, aux buffers): Sample::present of each sample
 };
 
 struct LoaderOptions {

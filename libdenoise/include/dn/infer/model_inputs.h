@@ -13,6 +13,13 @@
 
 namespace dn {
 
+// How a buffer is normalized: light passes, emission and environment like
+// radiance; albedo, colour passes and shader AOVs in [0, 1]; normals; depth; variances.
+enum class AuxKind { Radiance, Unit, Normal, Depth, Variance };
+AuxKind auxKind(const std::string& name);
+// Depth in scene units -> [0, 1], log-compressed, saturating at 1000 units.
+torch::Tensor normalizedDepth(const torch::Tensor& depth);
+
 // Linear HDR radiance (B,3,H,W) -> model range [0, 1): clamp to [0, 6], then the curve.
 torch::Tensor tonemapRadiance(const torch::Tensor& radiance, tonemap::Curve curve);
 // The exact inverse on the way out (values clamped to the curve's range first).

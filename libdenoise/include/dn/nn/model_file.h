@@ -15,6 +15,7 @@
 
 #include "dn/diffusion/schedule.h"
 #include "dn/nn/control_module.h"
+#include "dn/nn/oidn_control.h"
 #include "dn/nn/oidn_unet.h"
 #include "dn/nn/prior.h"
 #include "dn/nn/unet.h"
@@ -40,6 +41,10 @@ enum class BaseKind { DiffusionUNet, Oidn };
 struct OidnBaseInfo {
   OidnArch arch = OidnArch::Default;
   std::vector<std::string> input_sets = {"hdr_alb_nrm"};
+  // With ModelInfo::has_control: the Control Module steering one of the nets,
+  // and for diffusion models the default noise levels of the refinement.
+  OidnControlConfig control;
+  std::vector<double> sigmas;
 };
 
 struct ModelInfo {
@@ -78,6 +83,7 @@ struct LoadedModel {
   ModelInfo info;
   std::shared_ptr<ConditionalDenoiser> model;  // base_kind == DiffusionUNet
   OidnBase oidn{nullptr};                      // base_kind == Oidn
+  OidnControlled oidnControlled{nullptr};      // base_kind == Oidn with has_control
   // The base prior inside `model` (to freeze under a new Control Module).
   std::shared_ptr<DenoisingPrior> prior() const;
 };

@@ -28,6 +28,7 @@ struct OidnUNetConfig {
   OidnArch arch = OidnArch::Default;
   int64_t in_channels = 9;  // 3 colour, + 3 albedo, + 3 normal
   int64_t out_channels = 3;
+  bool encoder_only = false;  // the enc_* convolutions alone (a Control Module's copy)
 };
 
 // One convolution of the network: its OIDN name and channel counts.

@@ -18,11 +18,14 @@
 
 namespace dn {
 
-// All images tonemapped to [0, 1]; height and width may be anything.
+// Diffusion-UNet models: all images tonemapped to [0, 1]. OIDN-based models:
+// linear HDR as rendered, aux unnormalized (the loss prepares them as OIDN does).
+// Height and width may be anything.
 struct TrainBatch {
-  torch::Tensor noisy;   // (B,3,H,W) the noisy render: the conditioning image
-  torch::Tensor aux;     // (B,C,H,W) auxiliary buffers, or undefined when unused
-  torch::Tensor target;  // (B,3,H,W) the clean image
+  torch::Tensor noisy;    // (B,3,H,W) the noisy render: the conditioning image
+  torch::Tensor aux;      // (B,C,H,W) auxiliary buffers, or undefined when unused
+  torch::Tensor target;   // (B,3,H,W) the clean image
+  torch::Tensor present;  // (B, aux buffers) 1 where the render had the buffer (OIDN-based)
 };
 
 // Which (z_t, t) pairs the diffusion loss trains on.
@@ -63,6 +66,8 @@ class Trainer {
  public:
   // `info` describes `model` (it is written into checkpoints and model files).
   Trainer(std::shared_ptr<ConditionalDenoiser> model, ModelInfo info, TrainerOptions options);
+  // The Control Module over the frozen OIDN base (controlLoss).
+  Trainer(OidnControlled model, ModelInfo info, TrainerOptions options);
 
   StepStats step(const TrainBatch& batch);
   // Loss without a gradient step, with noise drawn from `seed` (comparable across calls).
@@ -71,7 +76,8 @@ class Trainer {
   int64_t stepCount() const { return step_; }
   double currentLearningRate() const;
   const ModelInfo& info() const { return info_; }
-  std::shared_ptr<ConditionalDenoiser> model() const { return model_; }
+  std::shared_ptr<ConditionalDenoiser> model() const { return model_; }  // null: OIDN-based
+  OidnControlled controlled() const { return controlled_; }              // null: diffusion UNet
 
   // Everything needed to continue exactly: weights, optimizer, EMA, step, RNG.
   void saveCheckpoint(const std::string& path);
@@ -89,6 +95,7 @@ class Trainer {
   void setGradientAverager(std::shared_ptr<GradientAverager> averager);
 
  private:
+  Trainer(std::shared_ptr<torch::nn::Module> module, ModelInfo info, TrainerOptions options, int);
   // The loss of info_.objective on one batch.
   torch::Tensor loss(const TrainBatch& batch, torch::Generator& generator);
   void updateEma();
@@ -96,7 +103,9 @@ class Trainer {
   // The generator of this step's timesteps and noise (rank-specific in data-parallel runs).
   torch::Generator& noiseGenerator();
 
+  std::shared_ptr<torch::nn::Module> module_;  // what trains, is saved and averaged
   std::shared_ptr<ConditionalDenoiser> model_;
+  OidnControlled controlled_{nullptr};
   ModelInfo info_;
   TrainerOptions options_;
   NoiseSchedule schedule_;

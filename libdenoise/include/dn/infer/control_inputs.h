@@ -1,0 +1,43 @@
+// What the controlled OIDN model sees, built from tensors of linear buffers so
+// that training and inference compute the same numbers: the base's input
+// exactly as oidnInput makes it, and the Control Module's hint input.
+#pragma once
+
+#include <utility>
+
+#include <torch/torch.h>
+
+#include "dn/infer/tiler.h"
+#include "dn/io/buffers.h"
+#include "dn/nn/oidn_control.h"
+
+namespace dn {
+
+// OIDN's PU transfer function and its inverse, elementwise on CPU float tensors
+// (NaN and negatives as 0 on the way in).
+torch::Tensor puEncode(const torch::Tensor& radiance);
+torch::Tensor puDecode(const torch::Tensor& encoded);
+
+// (B, 3 * buffers, H, W): the set's buffers, linear, concatenated in its order;
+// exposure (B) scales the colour. Equal to oidnInput on the same pixels.
+torch::Tensor oidnBaseInput(const torch::Tensor& buffers, const OidnInputSet& set,
+                            const torch::Tensor& exposure);
+
+// The hint input (B, config.hintChannels(), H, W): the extra buffers
+// (B, config.extraChannels(), H, W, linear; light passes scaled by exposure and
+// PU-encoded like the colour, colour passes clamped, depth log-compressed),
+// their presence flags (B, buffers) as constant planes, and for diffusion
+// models the state (B, 3, H, W, in the base's output space) and its noise level (B).
+torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& extras,
+                          const torch::Tensor& present, const torch::Tensor& exposure,
+                          const torch::Tensor& state = {}, const torch::Tensor& sigma = {});
+
+// The extra buffers of a region of `frame` (zeros where absent) and their flags.
+std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
+                                                    const OidnControlConfig& config,
+                                                    const TileRect& region);
+
+// The noise level as the hint network sees it (levels of a few hundredths).
+constexpr double kSigmaInputScale = 10.0;
+
+}  // namespace dn

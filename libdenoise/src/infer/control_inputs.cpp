@@ -1,0 +1,116 @@
+#include "dn/infer/control_inputs.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <ATen/Parallel.h>
+
+#include "dn/infer/model_inputs.h"
+#include "dn/tonemap.h"
+
+namespace dn {
+namespace {
+
+template <typename F>
+torch::Tensor elementwise(const torch::Tensor& x, F f) {
+  torch::Tensor out = x.to(torch::kCPU, torch::kFloat32).contiguous().clone();
+  float* p = out.data_ptr<float>();
+  at::parallel_for(0, out.numel(), 1 << 14, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) p[i] = f(p[i]);
+  });
+  return out;
+}
+
+float finiteOrZero(float v) { return std::isnan(v) ? 0.0f : v; }
+
+torch::Tensor perSample(const torch::Tensor& values, const torch::Tensor& like) {
+  return values.to(torch::kFloat32).view({like.size(0), 1, 1, 1});
+}
+
+}  // namespace
+
+torch::Tensor puEncode(const torch::Tensor& radiance) {
+  return elementwise(radiance, [](float v) {
+    return tonemap::pu(std::clamp(finiteOrZero(v), 0.0f, std::numeric_limits<float>::max()));
+  });
+}
+
+torch::Tensor puDecode(const torch::Tensor& encoded) {
+  return elementwise(encoded, [](float v) {
+    return std::min(tonemap::puInverse(std::max(finiteOrZero(v), 0.0f)),
+                    std::numeric_limits<float>::max());
+  });
+}
+
+torch::Tensor oidnBaseInput(const torch::Tensor& buffers, const OidnInputSet& set,
+                            const torch::Tensor& exposure) {
+  std::vector<torch::Tensor> parts;
+  for (size_t b = 0; b < set.buffers.size(); ++b) {
+    const torch::Tensor x = torch::nan_to_num(buffers.narrow(1, 3 * b, 3), 0.0, 0.0, 0.0);
+    if (set.buffers[b] == "color")
+      // Multiplied in float as oidnInput does, before the PU curve.
+      parts.push_back(puEncode(x * perSample(exposure, x)));
+    else if (set.buffers[b] == "albedo")
+      parts.push_back(x.clamp(0.0, 1.0));
+    else
+      parts.push_back(x.clamp(-1.0, 1.0) * 0.5 + 0.5);
+  }
+  return torch::cat(parts, 1);
+}
+
+torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& extras,
+                          const torch::Tensor& present, const torch::Tensor& exposure,
+                          const torch::Tensor& state, const torch::Tensor& sigma) {
+  std::vector<torch::Tensor> parts;
+  int64_t offset = 0;
+  for (const auto& name : config.extra_buffers) {
+    const int64_t channels = findBufferSpec(name)->channels;
+    const torch::Tensor x = torch::nan_to_num(extras.narrow(1, offset, channels), 0.0, 0.0, 0.0);
+    offset += channels;
+    switch (auxKind(name)) {
+      case AuxKind::Radiance:
+        parts.push_back(puEncode(x * perSample(exposure, x)));
+        break;
+      case AuxKind::Unit:
+        parts.push_back(x.clamp(0.0, 1.0));
+        break;
+      case AuxKind::Normal:
+        parts.push_back(x.clamp(-1.0, 1.0) * 0.5 + 0.5);
+        break;
+      case AuxKind::Depth:
+        parts.push_back(normalizedDepth(x));
+        break;
+      case AuxKind::Variance:
+        parts.push_back(puEncode(x * perSample(exposure * exposure, x)));
+        break;
+    }
+  }
+  const int64_t b = extras.size(0), h = extras.size(2), w = extras.size(3);
+  if (!config.extra_buffers.empty())
+    parts.push_back(present.to(torch::kFloat32).view({b, -1, 1, 1}).expand({b, -1, h, w}));
+  if (config.diffusion) {
+    parts.push_back(state);
+    parts.push_back((perSample(sigma, state) * kSigmaInputScale).expand({b, 1, h, w}));
+  }
+  return torch::cat(parts, 1);
+}
+
+std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
+                                                    const OidnControlConfig& config,
+                                                    const TileRect& r) {
+  std::vector<torch::Tensor> parts;
+  std::vector<float> flags;
+  for (const auto& name : config.extra_buffers) {
+    const int64_t channels = findBufferSpec(name)->channels;
+    const bool has = frame.has(name);
+    flags.push_back(has ? 1.0f : 0.0f);
+    parts.push_back(has ? imageRegionToTensor(frame.get(name), r.y0, r.x0, r.height, r.width)
+                        : torch::zeros({1, channels, r.height, r.width}));
+  }
+  torch::Tensor extras =
+      parts.empty() ? torch::zeros({1, 0, r.height, r.width}) : torch::cat(parts, 1);
+  return {extras, torch::tensor(flags).view({1, -1})};
+}
+
+}  // namespace dn
