@@ -22,6 +22,7 @@
 #include "common/finite.h"
 #include "common/progress.h"
 #include "common/sequence.h"
+#include "dn/diffusion/refine.h"
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
@@ -58,6 +59,9 @@ model and sampling:
                       metadata); given, it scales the default skip and
                       --mean-match instead of the measured noise
   --sampler ddpm|ddim sampler (default ddpm); --eta E (0-1) for DDIM
+  --sigmas LIST|none  models with a diffusion Control Module over the OIDN base:
+                      the refinement's noise levels, noisiest first (default: the
+                      model's); none: the base's estimate alone
   --seed N            random seed >= 0 (default 0): same seed, same output
   --samples K         mean of K samples (1-256), plus their standard deviation as an
                       'uncertainty' layer
@@ -193,6 +197,18 @@ Options parseArgs(int argc, char** argv) {
       o.denoise.exposure = v == "auto" ? 0.0 : cli::Args::toDouble("--exposure", v);
       if (v != "auto" && !(o.denoise.exposure > 0.0 && o.denoise.exposure <= 1e6))
         throw cli::UsageError("--exposure must be auto or a number in (0, 1e6], got " + v);
+    } else if (args.flag("--sigmas")) {
+      const std::string spec = args.value("--sigmas");
+      std::vector<double> sigmas;
+      if (spec != "none")
+        for (const auto& item : cli::splitList(spec))
+          sigmas.push_back(cli::Args::toDouble("--sigmas", item));
+      try {
+        checkSigmas(sigmas);
+      } catch (const std::invalid_argument& e) {
+        throw cli::UsageError(std::string("--sigmas: ") + e.what());
+      }
+      o.denoise.sigmas = sigmas;
     } else if (args.flag("--seed")) {
       o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     } else if (args.flag("--samples")) {
@@ -536,9 +552,15 @@ int run(Options o, int argc, char** argv) {
     if ((o.verbose || o.repeats > 1) && denoiser.info().base_kind == BaseKind::Oidn) {
       std::sort(times.begin(), times.end());
       fmt::print(stderr,
-                 "dndenoise: {}: pretrained base, exposure x{:.3g}, {} steps, {} tile(s) of {} px, "
+                 "dndenoise: {}: {}, exposure x{:.3g}, {} network steps, {} tile(s) of {} px, "
                  "{:.2f} s (median of {}), {:.2f} s/MPix\n",
-                 name, result.exposure, result.steps, result.tileCount, result.tileSize,
+                 name,
+                 denoiser.controlApplies(frame.names())
+                     ? (denoiser.info().oidn.control.diffusion
+                            ? "pretrained base + Control Module, diffusion refinement"
+                            : "pretrained base + Control Module, one pass")
+                     : "pretrained base",
+                 result.exposure, result.steps, result.tileCount, result.tileSize,
                  times[times.size() / 2], times.size(),
                  times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     } else if (o.verbose || o.repeats > 1) {

@@ -24,13 +24,16 @@
 #include "common/progress.h"
 #include "common/version.h"
 #include "dn/data/training_data.h"
+#include "dn/diffusion/refine.h"
 #include "dn/diffusion/sampler.h"
+#include "dn/infer/control_inputs.h"
 #include "dn/infer/denoiser.h"
 #include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/nn/control_module.h"
 #include "dn/nn/oidn_import.h"
+#include "dn/train/control_loss.h"
 #include "dn/train/distributed.h"
 #include "dn/train/trainer.h"
 
@@ -53,6 +56,11 @@ base     pretrains the pixel-space prior on clean images (the data set's ground
          truths and photographs) conditioned on a degraded copy of each.
 control  freezes a pretrained prior and trains the Control Module on the data
          set's low-spp renders and feature buffers against the clean targets.
+         With --base models/oidn.dnm (OIDN's networks): a Control Module over the
+         frozen colour + albedo + normal network, fed the --aux buffers it does
+         not see (any may be missing from a frame), the diffusion state and its
+         noise level; dndenoise refines the base's estimate in --sigmas steps.
+         regression trains the same module in one pass, without the state.
 regression  the ablation: the same networks (prior + Control Module, initialised
          from the prior, all weights trained) map the render to the clean image
          in one pass, trained with L1; dndenoise runs it in one network step.
@@ -68,7 +76,7 @@ import-oidn  converts the pretrained networks inside OIDN's core library (found 
          --variant large holds OIDN's one large network, trained on clean aux.
 
 options:
-  --data DIR            data set root (docs/dataset.md); training uses split 'train'
+  --data DIR[,DIR...]   data set roots (docs/dataset.md); training uses split 'train'
   --photos DIR          folder of photographs for the prior (repeatable)
   --base FILE           pretrained prior (control, regression)
   --init FILE           control: continue training the Control Module of this model
@@ -76,6 +84,9 @@ options:
   --out FILE            model file written at the end (EMA weights)
   --aux LIST|default|none  control inputs (default: Denoising Data + diffuse/glossy/
                         transmission light passes); none = the radiance-only ablation
+  --sigmas LIST         control over OIDN: the noise levels dndenoise refines at,
+                        noisiest first (default 0.05,0.02)
+  --hint-channels N     control over OIDN: width of the hint network (default 32)
   --steps N             total optimizer steps, >= 1 (default 2000); raise it and --resume
                         to extend
   --batch N             batch size, 1-1024 (default 8)
@@ -129,7 +140,8 @@ struct Options {
   std::string mode, data, base, init, out, log, checkpoint, model, respacing, lib;
   std::string variant = "default";
   std::vector<std::string> photos, noiseReference;
-  std::string aux = "default", prediction = "eps";
+  std::string aux = "default", prediction = "eps", sigmas = "0.05,0.02";
+  int64_t hintChannels = 32;
   std::vector<int> spp = {4, 16, 64};
   int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
           resBlocks = 0, defaultSkip = -1, defaultSpp = -1;
@@ -192,6 +204,10 @@ Options parseArgs(int argc, char** argv) {
       o.out = args.value("--out");
     else if (args.flag("--aux"))
       o.aux = args.value("--aux");
+    else if (args.flag("--sigmas"))
+      o.sigmas = args.value("--sigmas");
+    else if (args.flag("--hint-channels"))
+      o.hintChannels = args.intValue("--hint-channels", 1, 1024);
     else if (args.flag("--steps"))
       o.steps = args.intValue("--steps", 1, INT32_MAX);
     else if (args.flag("--batch"))
@@ -337,7 +353,77 @@ void stampProvenance(ModelInfo& info, const Options& o) {
 
 // The model to train, described by its ModelInfo (training options go in notes,
 // so a checkpoint only resumes the run it belongs to).
-std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Options& o) {
+// The extra buffers a Control Module over the OIDN base reads: --aux, or the
+// default aux buffers that the base does not see.
+std::vector<std::string> extraBuffers(const std::string& spec, const OidnInputSet& set) {
+  std::vector<std::string> extras;
+  for (const auto& name : auxBuffers(spec))
+    if (std::find(set.buffers.begin(), set.buffers.end(), name) == set.buffers.end())
+      extras.push_back(name);
+  return extras;
+}
+
+// control/regression over OIDN's networks: a new Control Module on the frozen
+// base of --base, or the one of --init continued.
+std::pair<ModelInfo, OidnControlled> buildOidnControlled(const Options& o, LoadedModel loaded) {
+  ModelInfo info = loaded.info;
+  if (!o.init.empty()) {
+    if (!info.has_control) throw IoError(o.init + ": has no Control Module to continue");
+    if (info.oidn.control.diffusion != (o.mode == "control"))
+      throw IoError(o.init + ": was trained with the other objective");
+    info.notes["init_model"] = fs::path(o.init).filename().string();
+    return {info, loaded.oidnControlled};
+  }
+  if (info.has_control)
+    throw IoError(o.base + ": already has a Control Module (continue it with --init)");
+  OidnControlConfig& c = info.oidn.control;
+  c.input_set = "hdr_alb_nrm";
+  const OidnInputSet& set = oidnInputSet(c.input_set);
+  if (std::find(info.oidn.input_sets.begin(), info.oidn.input_sets.end(), c.input_set) ==
+      info.oidn.input_sets.end())
+    throw IoError(o.base + ": has no colour + albedo + normal network to steer");
+  c.extra_buffers = extraBuffers(o.aux, set);
+  c.hint_channels = o.hintChannels;
+  c.diffusion = o.mode == "control";
+  info.has_control = true;
+  info.objective = c.diffusion ? Objective::Diffusion : Objective::Regression;
+  info.oidn.sigmas.clear();
+  if (c.diffusion)
+    for (const auto& item : cli::splitList(o.sigmas))
+      info.oidn.sigmas.push_back(cli::Args::toDouble("--sigmas", item));
+  checkSigmas(info.oidn.sigmas);
+  info.input_buffers.assign(set.buffers.begin() + 1, set.buffers.end());
+  info.input_buffers.insert(info.input_buffers.end(), c.extra_buffers.begin(),
+                            c.extra_buffers.end());
+  info.notes["base_model"] = fs::path(o.base).filename().string();
+  return {info, OidnControlled(loaded.oidn, c)};
+}
+
+struct BuiltModel {
+  ModelInfo info;
+  std::shared_ptr<ConditionalDenoiser> model;  // the diffusion UNet family
+  OidnControlled controlled{nullptr};          // over the OIDN base
+};
+
+void noteTrainingSettings(ModelInfo& info, const Options& o) {
+  info.notes["train.mode"] = o.mode;
+  info.notes["train.batch"] = std::to_string(o.batch);
+  info.notes["train.crop"] = std::to_string(o.crop);
+  info.notes["train.seed"] = std::to_string(o.seed);
+  if (o.maxTimestep > 0) info.notes["train.max_timestep"] = std::to_string(o.maxTimestep);
+  if (o.renderStart > 0) info.notes["train.render_start"] = fmt::format("{}", o.renderStart);
+  if (o.worldSize > 1) info.notes["train.world_size"] = std::to_string(o.worldSize);
+}
+
+BuiltModel buildModel(const Options& o) {
+  if (o.mode != "base") {
+    LoadedModel loaded = loadModelFile(o.init.empty() ? o.base : o.init);
+    if (loaded.info.base_kind == BaseKind::Oidn) {
+      auto [info, controlled] = buildOidnControlled(o, std::move(loaded));
+      noteTrainingSettings(info, o);
+      return {info, nullptr, controlled};
+    }
+  }
   ModelInfo info;
   std::shared_ptr<ConditionalDenoiser> model;
   if (o.mode == "base") {
@@ -371,15 +457,19 @@ std::pair<ModelInfo, std::shared_ptr<ConditionalDenoiser>> buildModel(const Opti
       for (auto& parameter : model->parameters()) parameter.set_requires_grad(true);
     }
   }
-  info.notes["train.mode"] = o.mode;
-  info.notes["train.batch"] = std::to_string(o.batch);
-  info.notes["train.crop"] = std::to_string(o.crop);
-  info.notes["train.seed"] = std::to_string(o.seed);
-  if (o.maxTimestep > 0) info.notes["train.max_timestep"] = std::to_string(o.maxTimestep);
-  if (o.renderStart > 0) info.notes["train.render_start"] = fmt::format("{}", o.renderStart);
-  if (o.worldSize > 1) info.notes["train.world_size"] = std::to_string(o.worldSize);
+  noteTrainingSettings(info, o);
   if (!model) model = buildDenoiser(info);
-  return {info, model};
+  return {info, model, nullptr};
+}
+
+// The frames of a split in every root of a comma-separated --data list.
+std::vector<data::FrameRecord> scanRoots(const std::string& roots, const std::string& split) {
+  std::vector<data::FrameRecord> frames;
+  for (const auto& root : cli::splitList(roots)) {
+    auto more = data::scanDataset(root, split);
+    frames.insert(frames.end(), more.begin(), more.end());
+  }
+  return frames;
 }
 
 // Produces the training batches of one mode, deterministically from (seed, step).
@@ -397,17 +487,26 @@ class BatchSource {
       so.spp = o.spp;
       so.aux = info.input_buffers;
       so.crop = static_cast<int>(o.crop);
+      so.missingAuxAsZero = info.base_kind == BaseKind::Oidn;  // renderers differ in passes
       data::LoaderOptions lo;
       lo.batchSize = static_cast<int>(renderedPerBatch());
       lo.seed = seed_;
       lo.threads = 2;
       loader_ = std::make_unique<data::Loader>(
-          data::scanDataset(o.data, split), so, lo,
+          scanRoots(o.data, split), so, lo,
           static_cast<std::uint64_t>(startStep * renderedPerBatch()));
     }
   }
 
   TrainBatch batch(int64_t step) {
+    if (info_.base_kind == BaseKind::Oidn) {
+      // Linear, as rendered: the loss prepares every input as OIDN does.
+      const data::Batch b = loader_->next();
+      const int64_t extras = int64_t(info_.oidn.control.extra_buffers.size());
+      const int64_t buffers = int64_t(info_.input_buffers.size());
+      return {colorTensor(b), auxTensor(b), targetTensor(b),
+              torch::tensor(b.present).view({b.size, buffers}).narrow(1, buffers - extras, extras)};
+    }
     if (o_.mode != "base") return toTrainBatch(loader_->next(), info_.input_buffers, curve_);
     // base: clean images from renders and photographs, conditioned on a degraded copy.
     auto generator = at::detail::createCPUGenerator(seed_ * 1000003 + static_cast<uint64_t>(step));
@@ -415,7 +514,7 @@ class BatchSource {
     if (loader_) clean.push_back(targetTensor(loader_->next()));
     if (photos_) clean.push_back(photos_->draw(o_.batch - renderedPerBatch(), o_.crop, generator));
     torch::Tensor x = torch::cat(clean, 0);
-    return {tonemapRadiance(degrade(x, generator), curve_), {}, tonemapRadiance(x, curve_)};
+    return {tonemapRadiance(degrade(x, generator), curve_), {}, tonemapRadiance(x, curve_), {}};
   }
 
  private:
@@ -462,6 +561,23 @@ std::string validate(Trainer& trainer, const TrainBatch& val, tonemap::Curve cur
       "\"input_psnr\": {:.4f}",
       trainer.evaluate(val, 11), l1(result, ref), psnr(result, ref), l1(input, ref),
       psnr(input, ref));
+}
+
+// The Control Module's validation loss against the base alone on the same
+// batch (L1 in the base's output space): what the control adds.
+std::string validateControlled(Trainer& trainer, const TrainBatch& val) {
+  const ModelInfo& info = trainer.info();
+  const OidnInputSet& set = oidnInputSet(info.oidn.control.input_set);
+  torch::NoGradGuard noGrad;
+  const torch::Tensor exposure = batchExposure(val.noisy);
+  const int64_t b = val.noisy.size(0), baseAux = 3 * (int64_t(set.buffers.size()) - 1);
+  const torch::Tensor x =
+      oidnBaseInput(torch::cat({val.noisy, val.aux.narrow(1, 0, baseAux)}, 1), set, exposure);
+  const torch::Tensor base = trainer.controlled()->steered()->forward(x);
+  const double baseLoss =
+      torch::l1_loss(base, puEncode(val.target * exposure.view({b, 1, 1, 1}))).item<double>();
+  return fmt::format("\"val_loss\": {:.6g}, \"base_val_loss\": {:.6g}", trainer.evaluate(val, 11),
+                     baseLoss);
 }
 
 // dntrain defaults: the model's sampling defaults, validated against its schedule.
@@ -551,7 +667,8 @@ int run(const Options& o) {
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 
-  auto [info, model] = buildModel(o);
+  BuiltModel built = buildModel(o);
+  const ModelInfo& info = built.info;
   TrainerOptions to;
   to.learning_rate = o.lr;
   to.halve_every = o.halveEvery;
@@ -559,7 +676,8 @@ int run(const Options& o) {
   to.seed = o.seed;
   to.diffusion.max_timestep = o.maxTimestep;
   to.diffusion.render_start = o.renderStart;
-  Trainer trainer(model, info, to);
+  Trainer trainer =
+      built.controlled ? Trainer(built.controlled, info, to) : Trainer(built.model, info, to);
   if (o.resume && fs::exists(o.checkpoint)) {
     trainer.loadCheckpoint(o.checkpoint);
     if (isMain)
@@ -574,7 +692,8 @@ int run(const Options& o) {
     Options vo = o;
     vo.seed = 12345;
     vo.batch = std::min<int64_t>(o.batch, 4);
-    const bool hasVal = !o.data.empty() && fs::is_directory(fs::path(o.data) / "val");
+    const bool hasVal =
+        !o.data.empty() && fs::is_directory(fs::path(cli::splitList(o.data).front()) / "val");
     val = BatchSource(vo, trainer.info(), hasVal ? "val" : "train", 0).batch(0);
   }
 
@@ -590,7 +709,7 @@ int run(const Options& o) {
         stderr, "dntrain {}: {} trainable parameters, steps {} -> {}\n", o.mode,
         [&] {
           int64_t n = 0;
-          for (const auto& p : model->parameters()) n += p.requires_grad() ? p.numel() : 0;
+          for (const auto& p : trainer.trainableParameters()) n += p.numel();
           return n;
         }(),
         firstStep, o.steps);
@@ -609,7 +728,9 @@ int run(const Options& o) {
         "\"elapsed_s\": {:.1f}",
         stats.step, stats.loss, stats.learning_rate, rate, elapsed);
     if (val && (stats.step % o.valEvery == 0 || stats.step == o.steps))
-      log << ", " << validate(trainer, *val, tonemap::curveFromName(info.tonemap));
+      log << ", "
+          << (built.controlled ? validateControlled(trainer, *val)
+                               : validate(trainer, *val, tonemap::curveFromName(info.tonemap)));
     log << "}\n" << std::flush;
     progress.update(
         double(stats.step) / o.steps,

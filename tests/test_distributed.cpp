@@ -140,7 +140,7 @@ TrainBatch fixedTrainBatch() {
   torch::manual_seed(9);
   auto target = torch::rand({kBatch, 3, 8, 8});
   auto noisy = (target + 0.2 * torch::randn({kBatch, 3, 8, 8})).clamp(0, 1);
-  return {noisy, {}, target};
+  return {noisy, {}, target, {}};
 }
 
 }  // namespace

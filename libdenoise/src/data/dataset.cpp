@@ -48,6 +48,12 @@ std::pair<Image, Image> readColorAndAux(const std::string& path,
                                         std::vector<float>* present = nullptr) {
   ReadOptions options;
   options.only = aux;
+  if (present) {  // only what the file has: readFrame refuses the rest
+    const auto has = availableBuffers(path);
+    options.only.clear();
+    for (const auto& name : aux)
+      if (std::find(has.begin(), has.end(), name) != has.end()) options.only.push_back(name);
+  }
   options.only.insert(options.only.begin(), "color");
   FrameBuffers frame = readFrame(path, options);
   int channels = 0;

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <filesystem>
 
-#include "dn/io/buffer_io.h"
 #include "dn/infer/model_inputs.h"
+#include "dn/io/buffer_io.h"
 
 namespace dn {
 
@@ -48,6 +48,9 @@ bool isImageFile(const fs::path& p) {
 
 torch::Tensor colorTensor(const data::Batch& batch) { return planar(batch.color, batch, 3); }
 torch::Tensor targetTensor(const data::Batch& batch) { return planar(batch.target, batch, 3); }
+torch::Tensor auxTensor(const data::Batch& batch) {
+  return planar(batch.aux, batch, batch.auxChannels);
+}
 
 TrainBatch toTrainBatch(const data::Batch& batch, const std::vector<std::string>& auxBuffers,
                         tonemap::Curve curve) {

@@ -4,6 +4,10 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <ATen/CPUGeneratorImpl.h>
+
+#include "dn/diffusion/refine.h"
+#include "dn/infer/control_inputs.h"
 #include "dn/infer/highlights.h"
 #include "dn/infer/mean_match.h"
 #include "dn/infer/model_inputs.h"
@@ -82,6 +86,7 @@ Image tensorToImage(const torch::Tensor& tensor) {
 }
 
 Denoiser::Denoiser(LoadedModel model) : model_(std::move(model)) {
+  if (model_.oidnControlled) model_.oidnControlled->eval();
   if (model_.oidn) {
     model_.oidn->eval();
     model_.oidn->useChannelsLast();
@@ -110,7 +115,21 @@ std::vector<std::string> Denoiser::missingBuffers(const std::vector<std::string>
   return missing;
 }
 
+bool Denoiser::controlApplies(const std::vector<std::string>& available) const {
+  if (!model_.oidnControlled) return false;
+  for (const auto& name : oidnInputSet(info().oidn.control.input_set).buffers)
+    if (std::find(available.begin(), available.end(), name) == available.end()) return false;
+  return true;
+}
+
 std::vector<std::string> Denoiser::usableBuffers(const std::vector<std::string>& available) const {
+  if (controlApplies(available)) {
+    std::vector<std::string> usable = oidnInputSet(info().oidn.control.input_set).buffers;
+    for (const auto& name : info().oidn.control.extra_buffers)
+      if (std::find(available.begin(), available.end(), name) != available.end())
+        usable.push_back(name);
+    return usable;
+  }
   if (info().base_kind == BaseKind::Oidn) {
     const OidnInputSet* set = model_.oidn->pick(available).second;
     return set ? set->buffers : std::vector<std::string>{};
@@ -249,8 +268,81 @@ DenoiseResult Denoiser::denoise(const FrameBuffers& frame, const DenoiseOptions&
   return result;
 }
 
+DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
+                                           const DenoiseOptions& options) const {
+  c10::InferenceMode inference;
+  const ModelInfo& mi = info();
+  OidnControlled model = model_.oidnControlled;
+  model->to(options.device);
+  const OidnControlConfig& config = mi.oidn.control;
+  const OidnInputSet& set = oidnInputSet(config.input_set);
+  const std::vector<double> sigmas =
+      config.diffusion ? options.sigmas.value_or(mi.oidn.sigmas) : std::vector<double>{};
+  checkSigmas(sigmas);
+  const int samples = sigmas.empty() ? 1 : options.samples;
+  const float exposure =
+      options.exposure > 0 ? float(options.exposure) : tonemap::oidnExposure(frame.get("color"));
+  const torch::Tensor exposures = torch::tensor({exposure});
+
+  OidnRunOptions run;
+  run.device = options.device;
+  run.exposure = exposure;
+  run.tile = options.tile;
+  // The control's encoder copy and the hint network run beside the base.
+  run.maxMemoryBytes = options.maxMemoryBytes / 1.5;
+  torch::Tensor noise;  // full-frame, so that overlapping tiles agree
+  run.network = [&](const torch::Tensor& x, const TileRect& r) {
+    // The hint is made on the CPU (the PU curve runs there) and moved.
+    auto [extras, present] = frameExtras(frame, config, r);
+    const std::vector<int64_t> pad = {0, x.size(3) - r.width, 0, x.size(2) - r.height};
+    extras = torch::constant_pad_nd(extras, pad, 0.0);
+    const auto features = model->steered()->encode(x);
+    if (!config.diffusion)
+      return model->decode(features, x,
+                           controlHint(config, extras, present, exposures).to(x.device()));
+    const torch::Tensor start = model->steered()->decode(features);
+    const torch::Tensor tileNoise =
+        torch::constant_pad_nd(noise.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width), pad, 0.0)
+            .to(x.device());
+    return refine(start, tileNoise, sigmas, [&](const torch::Tensor& state, double sigma) {
+      const torch::Tensor hint =
+          controlHint(config, extras, present, exposures, state.cpu(), torch::full({1}, sigma));
+      return model->decode(features, x, hint.to(x.device()));
+    });
+  };
+
+  torch::Tensor sum, sumSquares;
+  OidnRunResult out;
+  for (int k = 0; k < samples; ++k) {
+    auto generator = at::detail::createCPUGenerator(options.seed + uint64_t(k));
+    noise = torch::randn({1, 3, frame.height, frame.width}, generator);
+    if (options.progress) run.progress = [&, k](double f) { options.progress((k + f) / samples); };
+    OidnUNet steered = model->steered();
+    out = runOidn(steered, set, frame, run);
+    sum = k == 0 ? out.radiance : sum + out.radiance;
+    if (samples > 1)
+      sumSquares = k == 0 ? out.radiance.square() : sumSquares + out.radiance.square();
+  }
+  DenoiseResult result;
+  const double n = samples;
+  result.color = tensorToImage(sum / n);
+  if (samples > 1) {
+    const torch::Tensor mean = sum / n;
+    torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
+    result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
+  }
+  result.exposure = out.exposure;
+  result.steps = 1 + int64_t(sigmas.size());
+  result.tileSize = out.tileSize;
+  result.tileCount = out.tileCount;
+  result.buffersUsed = usableBuffers(frame.names());
+  return result;
+}
+
 DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
                                         const DenoiseOptions& options) const {
+  if (model_.oidnControlled && controlApplies(frame.names()))
+    return denoiseWithControl(frame, options);
   c10::InferenceMode inference;
   auto [net, set] = model_.oidn->pick(frame.names());
   net->to(options.device);

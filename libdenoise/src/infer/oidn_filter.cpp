@@ -107,7 +107,9 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
     x = torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0)
             .to(options.device)
             .contiguous(torch::MemoryFormat::ChannelsLast);
-    torch::Tensor y = net->forward(x).narrow(2, 0, r.height).narrow(3, 0, r.width);
+    torch::Tensor y = (options.network ? options.network(x, r) : net->forward(x))
+                          .narrow(2, 0, r.height)
+                          .narrow(3, 0, r.width);
     torch::Tensor radiance = oidnOutputToRadiance(y, result.exposure);
     if (options.progress) options.progress(double(++done) / tiler.tiles().size());
     return radiance;

@@ -23,6 +23,7 @@ TrainBatch toTrainBatch(const data::Batch& batch, const std::vector<std::string>
 // Planar linear-HDR tensors of a loader batch.
 torch::Tensor colorTensor(const data::Batch& batch);
 torch::Tensor targetTensor(const data::Batch& batch);
+torch::Tensor auxTensor(const data::Batch& batch);  // unnormalized
 
 // Photographs as clean HDR-ish training images: decoded from sRGB to linear,
 // random crops, flips and exposures (so highlights exceed 1 as in renders).

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,6 +45,10 @@ struct DenoiseOptions {
   // Where the network runs. CUDA runs the pretrained base (BaseKind::Oidn);
   // the diffusion models run on the CPU only (std::invalid_argument otherwise).
   torch::Device device = torch::kCPU;
+  // Models over the OIDN base with a diffusion Control Module: the noise levels
+  // of the refinement, noisiest first; unset: the model's own; empty: none (the
+  // base's estimate as it is).
+  std::optional<std::vector<double>> sigmas;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };
 
@@ -94,6 +99,9 @@ class Denoiser {
   std::vector<std::string> missingBuffers(const std::vector<std::string>& available) const;
   // The buffers the model would use from `available`, colour first.
   std::vector<std::string> usableBuffers(const std::vector<std::string>& available) const;
+  // Whether a Control Module steers the base on a render with these buffers
+  // (it needs its base network's inputs; its extra buffers may be missing).
+  bool controlApplies(const std::vector<std::string>& available) const;
   // Estimated activation bytes per pixel of one network evaluation (for tiling).
   double bytesPerPixel() const;
 
@@ -107,6 +115,7 @@ class Denoiser {
 
  private:
   DenoiseResult denoiseWithBase(const FrameBuffers& frame, const DenoiseOptions& options) const;
+  DenoiseResult denoiseWithControl(const FrameBuffers& frame, const DenoiseOptions& options) const;
 
   LoadedModel model_;
 };

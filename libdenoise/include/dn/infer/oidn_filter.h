@@ -38,6 +38,9 @@ struct OidnRunOptions {
   double maxMemoryBytes = 3.0e9;  //    the largest tile under this budget
   torch::Device device = torch::kCPU;
   std::function<void(double)> progress;  // 0..1 after every tile
+  // Replaces `net` on each tile: the padded input (1, C, h, w) and the tile's
+  // region of the frame -> the network's output of the same size.
+  std::function<torch::Tensor(const torch::Tensor&, const TileRect&)> network;
 };
 
 struct OidnRunResult {

@@ -74,6 +74,7 @@ class Trainer {
   double evaluate(const TrainBatch& batch, uint64_t seed);
 
   int64_t stepCount() const { return step_; }
+  const std::vector<torch::Tensor>& trainableParameters() const { return trainable_; }
   double currentLearningRate() const;
   const ModelInfo& info() const { return info_; }
   std::shared_ptr<ConditionalDenoiser> model() const { return model_; }  // null: OIDN-based
