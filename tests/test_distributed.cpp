@@ -178,7 +178,7 @@ TEST_CASE("two-process worker" * doctest::skip()) {
     trainer.setGradientAverager(averager);
     const TrainBatch all = fixedTrainBatch();
     const TrainBatch mine{
-        all.noisy.narrow(0, rank * share, share), {}, all.target.narrow(0, rank * share, share)};
+        all.noisy.narrow(0, rank * share, share), {}, all.target.narrow(0, rank * share, share), {}};
     std::vector<torch::Tensor> saved;
     for (int i = 0; i < kTrainerSteps; ++i)
       saved.push_back(torch::tensor({trainer.step(mine).loss}, torch::kDouble));

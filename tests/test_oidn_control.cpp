@@ -197,3 +197,33 @@ TEST_CASE("refinement: DDIM steps down the noise levels from the base's estimate
   CHECK_THROWS_AS(checkSigmas({0.1, 0.2}), std::invalid_argument);
   CHECK_THROWS_AS(checkSigmas({0.1, 0.0}), std::invalid_argument);
 }
+
+TEST_CASE("dndenoise's path: an untrained Control Module denoises exactly as the base") {
+  const std::string path =
+      fs::temp_directory_path() / ("dn_ctl_denoise_" + std::to_string(getpid()) + ".dnm");
+  LoadedModel base = loadModelFile(std::string(DN_SOURCE_DIR) + "/models/oidn.dnm");
+  const FrameBuffers frame = readFrame(kCrop);
+  DenoiseOptions options;
+  const Image expected = Denoiser(base).denoise(frame, options).color;
+  for (bool diffusion : {false, true}) {
+    CAPTURE(diffusion);
+    ModelInfo info = base.info;
+    info.has_control = true;
+    info.oidn.control = controlConfig(diffusion);
+    if (diffusion) info.oidn.sigmas = {0.05, 0.02};
+    OidnControlled model(base.oidn, info.oidn.control);
+    saveModelFile(path, info, *model);
+    const Denoiser denoiser = Denoiser::fromFile(path);
+    REQUIRE(denoiser.controlApplies(frame.names()));
+    options.samples = 2;
+    const DenoiseResult result = denoiser.denoise(frame, options);
+    CHECK(result.color.pixels == expected.pixels);
+    CHECK(result.steps == (diffusion ? 3 : 1));
+    if (diffusion) {
+      REQUIRE(result.uncertainty.pixels.size() > 0);
+      CHECK(*std::max_element(result.uncertainty.pixels.begin(), result.uncertainty.pixels.end()) ==
+            0.0f);
+    }
+  }
+  fs::remove(path);
+}
