@@ -86,6 +86,9 @@ def parse_args(argv):
     p.add_argument("--gt-spp", type=int, default=256, help="spp of each of gt_a and gt_b")
     p.add_argument("--filters", type=parse_filters, default=parse_filters("gaussian:0.7,box:0.2,tent:0.1"),
                    help="pixel filter mix NAME:WEIGHT,... of %s" % ", ".join(FILTERS))
+    p.add_argument("--max-gt-relmse", type=float, default=0.1,
+                   help="drop frames whose gt_a and gt_b differ more (relMSE without the 16 largest "
+                        "per-pixel errors): ground truth that did not converge")
     p.add_argument("--all-train", action="store_true", help="every scene in train/ instead of the seed split")
     p.add_argument("--shard", type=parse_shard, default=(0, 1))
     p.add_argument("--threads", type=int, default=1, help="render threads (scene loading uses 2, see load_scene)")
@@ -614,7 +617,33 @@ def exposure_for(scene, d, pose_seed):
     return min(s, cap)
 
 
+def gt_rel_mse(fdir, trim=16):
+    """relMSE of gt_a's colour against gt_b's, mean((a - b)^2 / (b^2 + 0.01)), without the `trim`
+    largest per-pixel errors (as scenegen/mitsuba_noise.py reports it)."""
+    import OpenEXR
+    a, b = (OpenEXR.File(os.path.join(fdir, n)).channels()["RGB"].pixels.astype(np.float64)
+            for n in ("gt_a.exr", "gt_b.exr"))
+    per_pixel = np.sort(np.mean((a - b) ** 2 / (b * b + 0.01), axis=-1).ravel())
+    return float(per_pixel[:per_pixel.size - trim].mean())
+
+
+def reject(fdir, files, value, limit):
+    """Drops a frame whose two ground truths disagree (light a path tracer does not converge,
+    such as caustics of tiny emitters seen through glass): meta.json goes first so that no
+    reader sees a frame without its files; rejected.json makes resumed runs skip it."""
+    for name in ["meta.json"] + list(files):
+        if os.path.exists(os.path.join(fdir, name)):
+            os.remove(os.path.join(fdir, name))
+    write_json_atomic(os.path.join(fdir, "rejected.json"),
+                      {"gt_relmse_trim16": value, "limit": limit,
+                       "reason": "gt_a and gt_b disagree: the ground truth is not converged"})
+
+
 def frame_done(fdir, args):
+    """Finished (meta.json and its files) or rejected. Frames made before the ground-truth check
+    are checked now."""
+    if os.path.exists(os.path.join(fdir, "rejected.json")):
+        return True
     try:
         with open(os.path.join(fdir, "meta.json")) as f:
             meta = json.load(f)
@@ -624,7 +653,17 @@ def frame_done(fdir, args):
     wrong = {k: meta.get(k) for k, v in settings.items() if meta.get(k) != v}
     if wrong:
         sys.exit("mitsuba_gen.py: %s was made with other settings (%s); use another --out" % (fdir, wrong))
-    return all(os.path.exists(os.path.join(fdir, f)) for f in meta["files"])
+    if not all(os.path.exists(os.path.join(fdir, f)) for f in meta["files"]):
+        return False
+    if "gt_relmse_trim16" not in meta:
+        meta["gt_relmse_trim16"] = gt_rel_mse(fdir)
+        if meta["gt_relmse_trim16"] > args.max_gt_relmse:
+            reject(fdir, meta["files"], meta["gt_relmse_trim16"], args.max_gt_relmse)
+            print("mitsuba_gen.py: %s rejected: relMSE of gt_a against gt_b %.3f > %.3f"
+                  % (fdir, meta["gt_relmse_trim16"], args.max_gt_relmse), file=sys.stderr)
+        else:
+            write_json_atomic(os.path.join(fdir, "meta.json"), meta)
+    return True
 
 
 def scene_dir(args, seed):
@@ -664,7 +703,12 @@ def render_frame(args, seed, k, scene_dict, d, variant):
                          "normal": "Denoising Normal.X Y Z: camera space as Cycles (x right, y up, z forward)",
                          "normals": "normals.X Y Z: world space (Mitsuba's sh_normal, y up)",
                          "depth": "depth.T: distance along the camera ray"}}
+    meta["gt_relmse_trim16"] = gt_rel_mse(fdir)
+    if meta["gt_relmse_trim16"] > args.max_gt_relmse:
+        reject(fdir, meta["files"], meta["gt_relmse_trim16"], args.max_gt_relmse)
+        return meta["gt_relmse_trim16"]
     write_json_atomic(os.path.join(fdir, "meta.json"), meta)
+    return None
 
 
 def prepare_scene(args, seed, tmpdir):
@@ -709,7 +753,10 @@ def main(argv):
         for seed, todo in work:
             scene, d = prepare_scene(args, seed, tmpdir)
             for k in todo:
-                render_frame(args, seed, k, scene, d, variant)
+                rejected = render_frame(args, seed, k, scene, d, variant)
+                if rejected is not None:
+                    print("mitsuba_gen.py: seed %d frame %d rejected: relMSE of gt_a against gt_b %.3f > %.3f"
+                          % (seed, k, rejected, args.max_gt_relmse), file=sys.stderr)
                 progress.frame(seed, k)
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)

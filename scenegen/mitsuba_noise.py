@@ -11,9 +11,11 @@ ref = (gt_a + gt_b) / 2:
 - relMSE of gt_a against gt_b and of one stack against ref: mean((x - y)^2 / (y^2 + 0.01))
   over pixels and channels, also without the 16 largest per-pixel errors (fireflies
   dominate the plain mean).
-Frames are grouped by meta.json's `filter` ("box" for frames without one: the
-Blender set, whose Cycles filter is importance-sampled, not splatted).
-Prints a Markdown table of the means per filter.
+Frames are grouped by meta.json's `filter` ("cycles" for frames without one: the
+Blender set, whose filter Cycles importance-samples instead of splatting).
+Prints a Markdown table of the means per filter, and for the frames that record it
+(mitsuba_gen.py's meta.json) the CPU seconds per frame per archetype: the throughput of
+one render thread on a free core.
 """
 
 import argparse
@@ -49,6 +51,26 @@ def measure(fdir, meta):
             "relmse_gt_trim16": rel_mse(gt_a, gt_b, 16), "relmse_stack_trim16": rel_mse(stacks[0], ref, 16)}
 
 
+def print_cost(metas):
+    """CPU seconds per frame (all files rendered in one run) per archetype, from meta.json."""
+    rows = {}
+    for meta in metas:
+        cpu = meta.get("render_cpu_seconds", {})
+        if "frame_cpu_seconds" not in meta or any(v is None for v in cpu.values()):
+            continue  # not a mitsuba_gen.py frame, or resumed from an interrupted run
+        gt = sum(v for k, v in cpu.items() if k.startswith("gt"))
+        rows.setdefault(meta["archetype"], []).append((meta["frame_cpu_seconds"], gt, sum(cpu.values()) - gt))
+    if not rows:
+        return
+    every = [r for v in rows.values() for r in v]
+    rows["all"] = every
+    print("\n| archetype | frames | CPU s per frame | ground truth | stacks | frames/h on one free core |")
+    print("|---|---|---|---|---|---|")
+    for name, v in rows.items():
+        total, gt, stacks = (float(np.mean([r[i] for r in v])) for i in range(3))
+        print("| %s | %d | %.1f | %.1f | %.1f | %.0f |" % (name, len(v), total, gt, stacks, 3600 / total))
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data")
@@ -60,15 +82,16 @@ def main():
         sys.exit("mitsuba_noise.py: %s: no finished frames" % args.data)
     if args.frames:
         metas = metas[:args.frames]
-    groups = {}
+    groups, all_meta = {}, []
     for path in metas:
         with open(path) as f:
             meta = json.load(f)
+        all_meta.append(meta)
         fdir = os.path.dirname(path)
         m = measure(fdir, meta)
-        groups.setdefault(meta.get("filter", "box"), []).append(m)
+        groups.setdefault(meta.get("filter", "cycles"), []).append(m)
         if args.per_frame:
-            print("%s %s %s" % (os.path.relpath(fdir, args.data), meta.get("filter", "box"),
+            print("%s %s %s" % (os.path.relpath(fdir, args.data), meta.get("filter", "cycles"),
                                 " ".join("%s=%.4f" % kv for kv in m.items())))
     keys = ("lag1_stack", "lag1_mean", "lag1_gt", "relmse_stack", "relmse_gt", "relmse_stack_trim16",
             "relmse_gt_trim16")
@@ -79,6 +102,7 @@ def main():
     for name, rows in sorted(groups.items()):
         print("| %s | %d | %s |" % (name, len(rows), " | ".join(
             ("%.3f" if k.startswith("lag") else "%.4f") % np.mean([r[k] for r in rows]) for k in keys)))
+    print_cost(all_meta)
     return 0
 
 

@@ -30,7 +30,7 @@ def check(condition, what):
 
 def generate(out, *extra):
     cmd = [sys.executable, GEN, "--out", out, "--seeds", str(SEED), "--frames", "1", "--res", "32",
-           "--stacks", "4", "--gt-spp", "64", "--all-train", *extra]
+           "--stacks", "4", "--gt-spp", "64", "--all-train", "--max-gt-relmse", "1e9", *extra]
     return subprocess.run(cmd, capture_output=True, text=True)
 
 
@@ -90,6 +90,15 @@ def main():
     rho_gauss, rho_box = lag1(fdir), lag1(os.path.join(box, "train", "scene_%06d" % SEED, "frame_0"))
     check(rho_gauss > 0.2, "Gaussian filter: lag-1 autocorrelation of the noise %.3f > 0.2" % rho_gauss)
     check(abs(rho_box) < 0.1, "box filter: lag-1 autocorrelation of the noise %.3f within 0.1 of 0" % rho_box)
+
+    strict = os.path.join(args.work_dir, "strict")
+    rdir = os.path.join(strict, "train", "scene_%06d" % SEED, "frame_0")
+    r = generate(strict, "--max-gt-relmse", "0")
+    check(r.returncode == 0 and "rejected" in r.stderr and os.path.exists(os.path.join(rdir, "rejected.json"))
+          and not glob.glob(os.path.join(rdir, "*.exr")) and not os.path.exists(os.path.join(rdir, "meta.json")),
+          "a frame whose ground truths disagree is dropped, rejected.json says why")
+    r = generate(strict, "--max-gt-relmse", "0")
+    check(r.returncode == 0 and "0 frames to render" in r.stderr, "a rejected frame is not rendered again")
 
     print("%d passed, %d failed" % (len(PASSED), len(FAILURES)))
     return 1 if FAILURES else 0
