@@ -172,7 +172,8 @@ def photo(path):
             bmp = mi.Bitmap(path).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
         w, h = bmp.size()
         scale = min(1.0, 512.0 / max(w, h))
-        _cache[path] = np.clip(np.array(bmp.resample([max(8, int(w * scale)), max(8, int(h * scale))]), dtype=np.float32), 0, 1)
+        small = bmp.resample([max(8, int(w * scale)), max(8, int(h * scale))])
+        _cache[path] = np.clip(np.array(small, dtype=np.float32), 0, 1)  # resampling overshoots a little
     return mi.Bitmap(_cache[path])
 
 
@@ -290,7 +291,7 @@ def vase_mesh(path, rng):
     write_obj(path, verts, grid_faces(24, 32))
 
 
-def add_object(scene, descs, rng, name, pos, size, bsdf_desc, tmpdir, kinds=None):
+def add_object(scene, descs, rng, name, pos, size, tmpdir, kinds=None):
     """One object of a random shape standing on the ground at pos (x, z)."""
     desc = {"name": name}
     bsdf = material(rng, desc, kinds)
@@ -335,7 +336,7 @@ def place_objects(scene, descs, rng, count, radius, tmpdir, kinds=None, size=(0.
             p = rng.uniform(-radius, radius, 2)
             if all(np.hypot(*(p - q)) > s + t + 0.05 for q, t in placed):
                 placed.append((p, s))
-                add_object(scene, descs, rng, "obj%d" % i, p, s, None, tmpdir, kinds)
+                add_object(scene, descs, rng, "obj%d" % i, p, s, tmpdir, kinds)
                 break
     return placed
 
@@ -359,7 +360,8 @@ def arch_room(rng, scene, d, tmpdir):
     w, depth, h = rng.uniform(4, 8), rng.uniform(4, 8), rng.uniform(2.5, 3.5)
     wall = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": rgb(colour(rng, 0.3, 0.85))}}
     ground(scene, d["objects"], rng, max(w, depth) / 2)
-    scene["ceiling"] = {"type": "rectangle", "bsdf": wall, "to_world": transform((0, h, 0), (w / 2, depth / 2, 1), 0, 90)}
+    scene["ceiling"] = {"type": "rectangle", "bsdf": wall,
+                        "to_world": transform((0, h, 0), (w / 2, depth / 2, 1), 0, 90)}
     for name, c, s, ry in (("wall_n", (0, h / 2, -depth / 2), (w / 2, h / 2, 1), 0),
                            ("wall_s", (0, h / 2, depth / 2), (w / 2, h / 2, 1), 180),
                            ("wall_w", (-w / 2, h / 2, 0), (depth / 2, h / 2, 1), 90),
@@ -378,8 +380,8 @@ def arch_room(rng, scene, d, tmpdir):
     d["visible_radiance"] = max(max(l["radiance"]) for l in lights)
     placed = place_objects(scene, d["objects"], rng, rng.integers(2, 7), min(w, depth) / 4, tmpdir)
     r = min(w, depth) / 2 - 0.3
-    return {"keep_out": placed, "target": (0, rng.uniform(0.3, 0.9), 0), "distance": (1.5, max(1.6, r)), "elevation": (5, 35),
-            "height_max": h - 0.2}
+    return {"keep_out": placed, "target": (0, rng.uniform(0.3, 0.9), 0), "distance": (1.5, max(1.6, r)),
+            "elevation": (5, 35), "height_max": h - 0.2}
 
 
 def environment(rng, scene, d, strength=(0.5, 2.0)):
