@@ -12,7 +12,7 @@ pixels and so correlates the noise of neighbouring pixels (issue 23).
       --filters gaussian:0.7,box:0.2,tent:0.1 --shard 0/1
 
 Runs under experiments/setup_renderers.sh's venv (mitsuba, numpy, OpenEXR).
-The llvm_ad_rgb variant (about twice as fast as scalar_rgb here) needs LLVM >= 17
+The llvm_ad_rgb variant (1.8x the speed of scalar_rgb here) needs LLVM >= 17
 (Debian: libllvm19); --variant auto falls back to scalar_rgb without it.
 """
 
