@@ -3,7 +3,8 @@
 
   oidn_denoise.py [--quality default|high|balanced|fast] [--threads N]
                   [--aux albedo,normal|albedo|none] IN.exr... -o OUT
-      HDR colour (the Combined pass) + Denoising Albedo + Denoising Normal, RT filter
+      HDR colour (the Combined pass) + Denoising Albedo + Denoising Normal (Mitsuba:
+      albedo, normals), RT filter
       (noisy auxiliary buffers, as rendered). --aux gives OIDN fewer buffers:
       colour + albedo, or colour alone, and OIDN picks its network for that set.
       OUT is a file for one input, or a folder (ending in /) for several: the
@@ -25,13 +26,23 @@ QUALITIES = {"default": OIDN_QUALITY_DEFAULT, "high": OIDN_QUALITY_HIGH,
              "balanced": OIDN_QUALITY_BALANCED, "fast": OIDN_QUALITY_FAST}
 
 
+def first_found(channels, layers, suffixes, path):
+    """Blender's layer names, else Mitsuba's AOV names (experiments/render_mitsuba.py)."""
+    for layer in layers[:-1]:
+        try:
+            return find_channels(channels, layer, suffixes, path)
+        except ExrError:
+            pass
+    return find_channels(channels, layers[-1], suffixes, path)
+
+
 def load_buffers(path):
     """Colour (finite, >= 0), albedo in [0, 1] and normals in [-1, 1], float32 (H, W, 3)."""
     channels, _ = read_channels(path)
     color = np.stack([channels[n].astype(np.float32) for n in color_names(channels, path)], axis=-1)
     color = np.nan_to_num(color, nan=0.0, posinf=0.0, neginf=0.0).clip(min=0.0)
-    albedo = find_channels(channels, "Denoising Albedo", "RGB", path).clip(0.0, 1.0)
-    normal = find_channels(channels, "Denoising Normal", "XYZ", path).clip(-1.0, 1.0)
+    albedo = first_found(channels, ("Denoising Albedo", "albedo"), "RGB", path).clip(0.0, 1.0)
+    normal = first_found(channels, ("Denoising Normal", "normals"), "XYZ", path).clip(-1.0, 1.0)
     return [np.ascontiguousarray(a) for a in (color, albedo, normal)]
 
 

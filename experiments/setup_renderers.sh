@@ -23,6 +23,11 @@ print(f"blender {bpy.app.version_string}, mitsuba {mitsuba.__version__}, numpy {
 EOF
 }
 
+# Mitsuba's llvm_ad_rgb variant (1.8x faster than scalar_rgb for the training
+# frames of scenegen/mitsuba_gen.py) needs LLVM 17-19; Debian 12's 15 and 16 fail.
+if command -v apt-get >/dev/null && [[ $(id -u) == 0 ]] && ! ldconfig -p | grep -q libLLVM-19; then
+  apt-get install -y -q libllvm19 >/dev/null || echo "setup_renderers.sh: no libllvm19: Mitsuba runs scalar_rgb" >&2
+fi
 if [[ -x "$venv/bin/python" ]] && check; then
   exit 0
 fi
