@@ -92,7 +92,8 @@ int main(int argc, char** argv) {
       frame = a;
   }
   if (model.empty() || frame.empty()) {
-    std::fprintf(stderr, "usage: oidn_profile --model FILE FRAME.exr [--threads N] [--repeats N]\n");
+    std::fprintf(stderr,
+                 "usage: oidn_profile --model FILE FRAME.exr [--threads N] [--repeats N]\n");
     return 2;
   }
   torch::set_num_threads(threads);
@@ -131,7 +132,8 @@ int main(int argc, char** argv) {
   stage("runOidn (all of the above)", [&] { runOidn(net, *set, buffers, options); });
 
   using namespace torch::autograd::profiler;
-  enableProfilerLegacy(torch::profiler::impl::ProfilerConfig(torch::profiler::impl::ProfilerState::CPU));
+  enableProfilerLegacy(
+      torch::profiler::impl::ProfilerConfig(torch::profiler::impl::ProfilerState::CPU));
   net->forward(x);
   printOperators(disableProfilerLegacy(), mpix);
   return 0;
