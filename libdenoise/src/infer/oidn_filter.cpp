@@ -94,8 +94,8 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
     if (pixels <= kOidnMaxTilePixels && pixels * bytesPerPixel <= options.maxMemoryBytes)
       tile = std::max(frame.width, frame.height);
     else
-      tile = std::min<int64_t>(2160, tileSizeForMemory(options.maxMemoryBytes, bytesPerPixel,
-                                                       kOidnAlignment));
+      tile = std::min<int64_t>(
+          2160, tileSizeForMemory(options.maxMemoryBytes, bytesPerPixel, kOidnAlignment));
   }
   // The Tiler gives every pixel within overlap / 4 of an inner tile edge zero
   // weight: at four times OIDN's overlap, each pixel that counts has as much
