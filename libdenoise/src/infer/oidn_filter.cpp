@@ -86,11 +86,16 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
   const int64_t overlap = config.arch == OidnArch::Large ? kOidnOverlapLarge : kOidnOverlap;
   int64_t tile = options.tile;
   if (tile <= 0) {
-    const int64_t side = std::max(frame.width, frame.height);
-    const int64_t budget =
-        tileSizeForMemory(options.maxMemoryBytes, oidnBytesPerPixel(config), kOidnAlignment);
-    const int64_t fits = int64_t(frame.width) * frame.height <= kOidnMaxTilePixels ? side : 2160;
-    tile = std::min(fits, budget);
+    // The whole frame when its pixels fit the budget: a square tile from the
+    // budget alone would split a 1920x1080 frame (2.1 MPix) into two
+    // 1840-pixel-wide tiles that overlap almost entirely, doing twice the work.
+    const double bytesPerPixel = oidnBytesPerPixel(config);
+    const int64_t pixels = int64_t(frame.width) * frame.height;
+    if (pixels <= kOidnMaxTilePixels && pixels * bytesPerPixel <= options.maxMemoryBytes)
+      tile = std::max(frame.width, frame.height);
+    else
+      tile = std::min<int64_t>(
+          2160, tileSizeForMemory(options.maxMemoryBytes, bytesPerPixel, kOidnAlignment));
   }
   // The Tiler gives every pixel within overlap / 4 of an inner tile edge zero
   // weight: at four times OIDN's overlap, each pixel that counts has as much
