@@ -87,7 +87,45 @@ fs::path writeTemp(const std::string& name, const std::string& bytes) {
   return path;
 }
 
+// The default-size network written out plainly, as OIDN's model.py runs it:
+// upsample, concatenate, convolve. An independent reference for forward().
+torch::Tensor plainForward(OidnUNet& net, const torch::Tensor& input) {
+  auto params = net->named_parameters();
+  auto conv = [&](const std::string& name, const torch::Tensor& x) {
+    return torch::conv2d(x, params[name + ".weight"], params[name + ".bias"], 1, 1).relu();
+  };
+  auto pool = [](const torch::Tensor& x) { return torch::max_pool2d(x, 2, 2); };
+  auto upCat = [](const torch::Tensor& x, const torch::Tensor& skip) {
+    return torch::cat({torch::upsample_nearest2d(x, {x.size(2) * 2, x.size(3) * 2}), skip}, 1);
+  };
+  auto pool1 = pool(conv("enc_conv1", conv("enc_conv0", input)));
+  auto pool2 = pool(conv("enc_conv2", pool1));
+  auto pool3 = pool(conv("enc_conv3", pool2));
+  auto pool4 = pool(conv("enc_conv4", pool3));
+  auto x = conv("enc_conv5b", conv("enc_conv5a", pool4));
+  x = conv("dec_conv4b", conv("dec_conv4a", upCat(x, pool3)));
+  x = conv("dec_conv3b", conv("dec_conv3a", upCat(x, pool2)));
+  x = conv("dec_conv2b", conv("dec_conv2a", upCat(x, pool1)));
+  return conv("dec_conv0", conv("dec_conv1b", conv("dec_conv1a", upCat(x, input))));
+}
+
 }  // namespace
+
+TEST_CASE("the folded upsampling computes what upsample, concatenate and convolve compute") {
+  torch::manual_seed(3);
+  OidnUNet net(OidnUNetConfig{OidnArch::Default, 9, 3});
+  for (auto format : {torch::MemoryFormat::Contiguous, torch::MemoryFormat::ChannelsLast}) {
+    const auto input = torch::rand({2, 9, 48, 32}).contiguous(format).requires_grad_();
+    const auto ours = net->forward(input);
+    const auto plain = plainForward(net, input);
+    CHECK(torch::allclose(ours, plain, 1e-4, 1e-5));
+    // and so are the gradients that a Control Module trains through
+    const auto g = torch::randn_like(plain);
+    const auto gradOurs = torch::autograd::grad({ours}, {input}, {g})[0];
+    const auto gradPlain = torch::autograd::grad({plain}, {input}, {g})[0];
+    CHECK(torch::allclose(gradOurs, gradPlain, 1e-4, 1e-5));
+  }
+}
 
 TEST_CASE("the networks have OIDN's parameter counts") {
   // As counted from OIDN 2.5.1's own weight blobs.

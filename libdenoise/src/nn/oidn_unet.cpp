@@ -21,6 +21,19 @@ Widths widthsOf(OidnArch arch) {
   }
 }
 
+// Nearest 2x upsampling followed by a 3x3 convolution is, for each of the four
+// output pixel phases, a 2x2 convolution of the coarse input: the taps that
+// land on the same coarse pixel add up. Along one axis, even outputs see the
+// coarse offsets {-1, 0} with taps {w0, w1 + w2}, odd outputs {0, +1} with
+// {w0 + w1, w2}. (O, I, 3, 3) -> (4 O, I, 2, 2), output groups ordered by
+// phase (row, column): 16 instead of 36 multiply-adds per coarse pixel.
+torch::Tensor foldUpsampling(const torch::Tensor& weight) {
+  const torch::Tensor taps =
+      torch::tensor({1, 0, 0, 0, 1, 1, 1, 1, 0, 0, 0, 1}, weight.options()).view({2, 2, 3});
+  return torch::einsum("pak,oikl,qbl->pqoiab", {taps, weight, taps})
+      .reshape({4 * weight.size(0), weight.size(1), 2, 2});
+}
+
 }  // namespace
 
 const char* oidnArchName(OidnArch arch) {
@@ -106,6 +119,26 @@ torch::Tensor OidnUNetImpl::conv(const std::string& name, const torch::Tensor& x
   return convs_.at(name)->forward(x).relu_();
 }
 
+torch::Tensor OidnUNetImpl::upConv(const std::string& name, const torch::Tensor& coarse,
+                                   const torch::Tensor& skip) {
+  const torch::nn::Conv2d& c = convs_.at(name);
+  const int64_t batch = coarse.size(0), ch = coarse.size(1), h = coarse.size(2), w = coarse.size(3);
+  const int64_t outCh = c->weight.size(0);
+  const auto format = coarse.suggest_memory_format();
+  // The skip's share of the convolution, at the fine resolution, with the bias.
+  torch::Tensor out = torch::conv2d(skip, c->weight.narrow(1, ch, skip.size(1)), c->bias, 1, 1);
+  // The upsampled share: every phase from the coarse input, padded by one so
+  // that phase (py, px) is the window starting at (py, px).
+  const torch::Tensor phases = torch::conv2d(
+      coarse, foldUpsampling(c->weight.narrow(1, 0, ch)).contiguous(format), {}, 1, 1);
+  const torch::Tensor fine = out.view({batch, outCh, h, 2, w, 2});
+  for (int64_t py = 0; py < 2; ++py)
+    for (int64_t px = 0; px < 2; ++px)
+      fine.select(3, py).select(4, px).add_(
+          phases.narrow(1, (2 * py + px) * outCh, outCh).narrow(2, py, h).narrow(3, px, w));
+  return out.relu_();
+}
+
 torch::Tensor OidnUNetImpl::forward(const torch::Tensor& input, const ControlResiduals* residuals) {
   return decode(encode(input), residuals);
 }
@@ -135,8 +168,9 @@ torch::Tensor OidnUNetImpl::decode(const Features& features, const ControlResidu
   for (size_t level = 0; level < decoder_.size(); ++level) {
     torch::Tensor skip = features.skips[level];
     if (residuals) skip = skip + residuals->skips[level];
-    x = torch::cat({torch::upsample_nearest2d(x, {x.size(2) * 2, x.size(3) * 2}), skip}, 1);
-    for (const auto& name : decoder_[level]) x = conv(name, x);
+    const auto& names = decoder_[level];
+    x = upConv(names.front(), x, skip);
+    for (size_t i = 1; i < names.size(); ++i) x = conv(names[i], x);
   }
   return x;
 }

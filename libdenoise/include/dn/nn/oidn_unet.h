@@ -67,6 +67,9 @@ class OidnUNetImpl : public torch::nn::Module {
 
  private:
   torch::Tensor conv(const std::string& name, const torch::Tensor& x);
+  // conv(name, cat(upsample2x(coarse), skip)) without the upsampled copy.
+  torch::Tensor upConv(const std::string& name, const torch::Tensor& coarse,
+                       const torch::Tensor& skip);
 
   OidnUNetConfig config_;
   std::vector<std::vector<std::string>> encoder_;  // per level, pooled after the last
