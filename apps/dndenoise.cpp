@@ -62,6 +62,9 @@ model and sampling:
   --sigmas LIST|none  models with a diffusion Control Module over the OIDN base:
                       the refinement's noise levels, noisiest first (default: the
                       model's); none: the base's estimate alone
+  --control auto|on|off  such models: steer the base with the Control Module
+                      when the base leaves correlated noise (auto, default: a
+                      pixel filter that splats samples), always, or never
   --seed N            random seed >= 0 (default 0): same seed, same output
   --samples K         mean of K samples (1-256), plus their standard deviation as an
                       'uncertainty' layer
@@ -209,6 +212,16 @@ Options parseArgs(int argc, char** argv) {
         throw cli::UsageError(std::string("--sigmas: ") + e.what());
       }
       o.denoise.sigmas = sigmas;
+    } else if (args.flag("--control")) {
+      const std::string v = args.value("--control");
+      if (v == "auto")
+        o.denoise.control = ControlUse::Auto;
+      else if (v == "on")
+        o.denoise.control = ControlUse::Always;
+      else if (v == "off")
+        o.denoise.control = ControlUse::Never;
+      else
+        throw cli::UsageError("--control must be auto, on or off, got " + v);
     } else if (args.flag("--seed")) {
       o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     } else if (args.flag("--samples")) {
@@ -549,17 +562,21 @@ int run(Options o, int argc, char** argv) {
     if (o.verbose)
       reportBuffers(name, result.buffersUsed,
                     input.empty() ? frame.names() : allowed(o, availableBuffers(input, o.read)));
+    if (o.verbose && result.noiseLeft)
+      fmt::print(stderr, "dndenoise: {}: the base left {:.0f}% of the noise: {}\n", name,
+                 100 * result.noiseLeft->fraction(),
+                 correlatedNoiseLeft(*result.noiseLeft) ? "correlated (a splatting pixel filter)"
+                                                        : "independent per pixel");
     if ((o.verbose || o.repeats > 1) && denoiser.info().base_kind == BaseKind::Oidn) {
       std::sort(times.begin(), times.end());
       fmt::print(stderr,
                  "dndenoise: {}: {}, exposure x{:.3g}, {} network steps, {} tile(s) of {} px, "
                  "{:.2f} s (median of {}), {:.2f} s/MPix\n",
                  name,
-                 denoiser.controlApplies(frame.names())
-                     ? (denoiser.info().oidn.control.diffusion
-                            ? "pretrained base + Control Module, diffusion refinement"
-                            : "pretrained base + Control Module, one pass")
-                     : "pretrained base",
+                 result.steered ? (denoiser.info().oidn.control.diffusion
+                                       ? "pretrained base + Control Module, diffusion refinement"
+                                       : "pretrained base + Control Module, one pass")
+                                : "pretrained base",
                  result.exposure, result.steps, result.tileCount, result.tileSize,
                  times[times.size() / 2], times.size(),
                  times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));

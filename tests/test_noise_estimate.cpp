@@ -66,3 +66,26 @@ TEST_CASE("texture that the feature buffers explain is not taken for noise") {
   const FrameBuffers allTextured = frameWith(0.5 + gaussian(48, 48, 0.2, 5));
   CHECK(estimateNoise(noisy, allTextured) == doctest::Approx(estimateNoise(noisy, FrameBuffers{})));
 }
+
+TEST_CASE("the noise a denoiser leaves, as a fraction of its input's") {
+  const FrameBuffers none;
+  const auto clean = ramp(96, 96);
+  // Independent noise, removed: nothing left.
+  const auto noisy = clean + gaussian(96, 96, 0.1, 5);
+  const NoiseLeft removed = measureNoiseLeft(noisy, clean, none);
+  CHECK(removed.fraction() < 1e-3);
+  CHECK_FALSE(correlatedNoiseLeft(removed));
+  // Half of it removed.
+  CHECK(measureNoiseLeft(noisy, clean + 0.5 * (noisy - clean), none).fraction() ==
+        doctest::Approx(0.5).epsilon(1e-6));
+  // Noise splatted over 2x2 pixels, left as it is: all of it, taken for correlated.
+  const auto n = gaussian(97, 97, 0.1, 6);
+  const auto splat = (n.narrow(2, 0, 96) + n.narrow(2, 1, 96)).narrow(3, 0, 96) +
+                     (n.narrow(2, 0, 96) + n.narrow(2, 1, 96)).narrow(3, 1, 96);
+  const NoiseLeft kept = measureNoiseLeft(clean + splat, clean + splat, none);
+  CHECK(kept.fraction() == doctest::Approx(1.0));
+  CHECK(correlatedNoiseLeft(kept));
+  // Too small to measure.
+  CHECK(measureNoiseLeft(torch::rand({1, 3, 2, 2}), torch::rand({1, 3, 2, 2}), none).fraction() ==
+        0.0);
+}

@@ -206,6 +206,7 @@ TEST_CASE("dndenoise's path: an untrained Control Module denoises exactly as the
   const FrameBuffers frame = readFrame(kCrop);
   DenoiseOptions options;
   const Image expected = Denoiser(base).denoise(frame, options).color;
+  options.control = ControlUse::Always;
   for (bool diffusion : {false, true}) {
     CAPTURE(diffusion);
     ModelInfo info = base.info;
@@ -241,11 +242,42 @@ TEST_CASE("the trained Control Module denoises a splatted render that OIDN leave
   const std::string models = std::string(DN_SOURCE_DIR) + "/models/";
   const auto noisy = score(frame.get("color"));
   const auto base = score(Denoiser::fromFile(models + "oidn.dnm").denoise(frame, {}).color);
-  const auto steered =
-      score(Denoiser::fromFile(models + "oidn-control-diffusion.dnm").denoise(frame, {}).color);
+  const DenoiseResult result =
+      Denoiser::fromFile(models + "oidn-control-diffusion.dnm").denoise(frame, {});
+  CHECK(result.steered);  // the base left the noise: taken for correlated
+  REQUIRE(result.noiseLeft);
+  CHECK(result.noiseLeft->fraction() > kCorrelatedNoiseLeft);
+  const auto steered = score(result.color);
   MESSAGE("PSNR noisy ", noisy.at("psnr"), ", base ", base.at("psnr"), ", controlled ",
           steered.at("psnr"));
   CHECK(base.at("psnr") - noisy.at("psnr") < 1.0);     // OIDN's failure on splatted noise
   CHECK(steered.at("psnr") - noisy.at("psnr") > 4.0);  // measured 5.3 dB
   CHECK(steered.at("flip") < base.at("flip") - 0.02);  // measured 0.087 against 0.118
+}
+
+TEST_CASE("on independent noise the Control Module leaves the base alone, unless told") {
+  // The committed renders of Cycles 3.4, Blender 5 and Mitsuba with a box filter.
+  const std::string models = std::string(DN_SOURCE_DIR) + "/models/";
+  const Denoiser base = Denoiser::fromFile(models + "oidn.dnm");
+  const Denoiser controlled = Denoiser::fromFile(models + "oidn-control-diffusion.dnm");
+  for (const char* file : {"/example/scene000201_4spp.exr", "/renderers/blender5_hdri_4spp.exr",
+                           "/renderers/mitsuba_box_matpreview_4spp.exr"}) {
+    CAPTURE(file);
+    const FrameBuffers frame = readFrame(std::string(DN_TESTDATA) + file);
+    const DenoiseResult result = controlled.denoise(frame, {});
+    CHECK_FALSE(result.steered);
+    REQUIRE(result.noiseLeft);
+    CHECK(result.noiseLeft->fraction() < kCorrelatedNoiseLeft);
+    CHECK(imageToTensor(result.color).equal(imageToTensor(base.denoise(frame, {}).color)));
+  }
+  const FrameBuffers frame = readFrame(std::string(DN_TESTDATA) + "/example/scene000201_4spp.exr");
+  DenoiseOptions always;
+  always.control = ControlUse::Always;
+  always.sigmas = std::vector<double>{};  // one pass is enough to tell
+  CHECK(controlled.denoise(frame, always).steered);
+  DenoiseOptions never;
+  never.control = ControlUse::Never;
+  const DenoiseResult alone = controlled.denoise(frame, never);
+  CHECK_FALSE(alone.steered);
+  CHECK_FALSE(alone.noiseLeft);
 }

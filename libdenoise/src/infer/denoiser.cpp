@@ -333,6 +333,7 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
   }
   result.exposure = out.exposure;
   result.steps = 1 + int64_t(sigmas.size());
+  result.steered = true;
   result.tileSize = out.tileSize;
   result.tileCount = out.tileCount;
   result.buffersUsed = usableBuffers(frame.names());
@@ -341,26 +342,40 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
 
 DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
                                         const DenoiseOptions& options) const {
-  if (model_.oidnControlled && controlApplies(frame.names()))
-    return denoiseWithControl(frame, options);
-  c10::InferenceMode inference;
-  auto [net, set] = model_.oidn->pick(frame.names());
-  net->to(options.device);
-  OidnRunOptions run;
-  run.device = options.device;
-  run.exposure = static_cast<float>(options.exposure);
-  run.tile = options.tile;
-  run.maxMemoryBytes = options.maxMemoryBytes;
-  run.progress = options.progress;
-  OidnRunResult out = runOidn(net, *set, frame, run);
+  const bool control = controlApplies(frame.names());
+  if (control && options.control == ControlUse::Always) return denoiseWithControl(frame, options);
   DenoiseResult result;
-  result.color = tensorToImage(out.radiance);
-  result.exposure = out.exposure;
-  result.steps = 1;
-  result.tileSize = out.tileSize;
-  result.tileCount = out.tileCount;
-  result.buffersUsed = set->buffers;
-  return result;
+  {
+    c10::InferenceMode inference;
+    OidnBase base = model_.oidnControlled ? model_.oidnControlled->base() : model_.oidn;
+    auto [net, set] = base->pick(frame.names());
+    net->to(options.device);
+    OidnRunOptions run;
+    run.device = options.device;
+    run.exposure = static_cast<float>(options.exposure);
+    run.tile = options.tile;
+    run.maxMemoryBytes = options.maxMemoryBytes;
+    run.progress = options.progress;
+    OidnRunResult out = runOidn(net, *set, frame, run);
+    result.color = tensorToImage(out.radiance);
+    result.exposure = out.exposure;
+    result.steps = 1;
+    result.tileSize = out.tileSize;
+    result.tileCount = out.tileCount;
+    result.buffersUsed = set->buffers;
+    if (control && options.control == ControlUse::Auto) {
+      // Compared where the base works: exposed and PU-encoded.
+      const torch::Tensor input = imageToTensor(frame.get("color")) * out.exposure;
+      result.noiseLeft = measureNoiseLeft(puEncode(input.nan_to_num(0.0).clamp_min(0.0)),
+                                          puEncode(out.radiance * out.exposure), frame);
+    }
+  }
+  if (options.control != ControlUse::Auto || !result.noiseLeft ||
+      !correlatedNoiseLeft(*result.noiseLeft))
+    return result;
+  DenoiseResult steered = denoiseWithControl(frame, options);
+  steered.noiseLeft = result.noiseLeft;
+  return steered;
 }
 
 }  // namespace dn

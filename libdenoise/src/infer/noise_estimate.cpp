@@ -24,13 +24,58 @@ torch::Tensor highPass(const torch::Tensor& x) {
   return F::conv2d(x, kernel.expand({c, 1, 3, 3}), F::Conv2dFuncOptions().groups(c));
 }
 
-}  // namespace
-
-double estimateNoise(const torch::Tensor& image, const FrameBuffers& frame) {
-  torch::NoGradGuard noGrad;
+std::vector<std::string> featureBuffers(const FrameBuffers& frame) {
   std::vector<std::string> features;
   for (const char* name : {"albedo", "normal", "depth"})
     if (frame.has(name)) features.push_back(name);
+  return features;
+}
+
+// 1 where no feature buffer has an edge or texture, for rows [y0, y0 + rows)
+// less the first and last (the valid pixels of highPass).
+torch::Tensor flatPixels(const FrameBuffers& frame, const std::vector<std::string>& features,
+                         int64_t y0, int64_t rows) {
+  // The normalization needs a curve only for radiance buffers, which these are not.
+  const auto guide =
+      normalizedAuxRegion(frame, features, tonemap::Curve::Log, y0, 0, rows, frame.width, 1.0);
+  const auto edge = std::get<0>(highPass(guide).abs().max(1, true));
+  return (edge < kFeatureEdge).to(torch::kFloat64);
+}
+
+}  // namespace
+
+NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
+                           const FrameBuffers& frame) {
+  torch::NoGradGuard noGrad;
+  const std::vector<std::string> features = featureBuffers(frame);
+  const int64_t height = input.size(2), width = input.size(3);
+  NoiseLeft left;
+  if (height < 3 || width < 3) return left;
+  double inputSum = 0, outputSum = 0;
+  for (int64_t y0 = 0; y0 + 2 < height; y0 += kStripRows) {
+    const int64_t rows = std::min(kStripRows + 2, height - y0);
+    const auto flat = features.empty() ? torch::ones({1, 1, rows - 2, width - 2}, torch::kFloat64)
+                                       : flatPixels(frame, features, y0, rows);
+    auto energy = [&](const torch::Tensor& image) {
+      return (highPass(image.narrow(2, y0, rows).to(torch::kFloat64)).pow(2) * flat)
+          .sum()
+          .item<double>();
+    };
+    inputSum += energy(input);
+    outputSum += energy(output);
+  }
+  left.input = std::sqrt(inputSum);
+  left.output = std::sqrt(outputSum);
+  return left;
+}
+
+bool correlatedNoiseLeft(const NoiseLeft& left) {
+  return left.input > 0 && left.output > kCorrelatedNoiseLeft * left.input;
+}
+
+double estimateNoise(const torch::Tensor& image, const FrameBuffers& frame) {
+  torch::NoGradGuard noGrad;
+  const std::vector<std::string> features = featureBuffers(frame);
   const int64_t height = image.size(2);
   if (height < 3 || image.size(3) < 3) return 0.0;
   double maskedSum = 0.0, allSum = 0.0;
@@ -42,11 +87,7 @@ double estimateNoise(const torch::Tensor& image, const FrameBuffers& frame) {
     allSum += squared.sum().item<double>();
     allCount += squared.numel();
     if (features.empty()) continue;
-    // The normalization needs a curve only for radiance buffers, which these are not.
-    const auto guide =
-        normalizedAuxRegion(frame, features, tonemap::Curve::Log, y0, 0, rows, frame.width, 1.0);
-    const auto edge = std::get<0>(highPass(guide).abs().max(1, true));
-    const auto flat = (edge < kFeatureEdge).to(torch::kFloat64);
+    const auto flat = flatPixels(frame, features, y0, rows);
     maskedSum += (squared * flat).sum().item<double>();
     maskedCount += flat.sum().item<int64_t>() * image.size(1);
   }

@@ -12,6 +12,7 @@
 
 #include "dn/diffusion/sampler.h"
 #include "dn/image.h"
+#include "dn/infer/noise_estimate.h"
 #include "dn/infer/oidn_filter.h"
 #include "dn/io/buffers.h"
 #include "dn/nn/model_file.h"
@@ -23,6 +24,13 @@ constexpr int64_t kMaxDefaultTile = 256;
 
 // Local mean matching radius of the model defaults, in pixels (dn/mean_match.h).
 constexpr double kDefaultMeanMatchSigma = 2.0;
+
+// When a Control Module over the OIDN base steers it (models with one).
+enum class ControlUse {
+  Auto,  // when the base leaves correlated noise (dn/infer/noise_estimate.h)
+  Always,
+  Never,  // the base alone
+};
 
 struct DenoiseOptions {
   std::string respacing;  // "" = the model's default (27 steps); "10" = 10 evenly spaced steps
@@ -49,6 +57,7 @@ struct DenoiseOptions {
   // of the refinement, noisiest first; unset: the model's own; empty: none (the
   // base's estimate as it is).
   std::optional<std::vector<double>> sigmas;
+  ControlUse control = ControlUse::Auto;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };
 
@@ -86,6 +95,8 @@ struct DenoiseResult {
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
   std::vector<std::string> buffersUsed;  // the input buffers the network saw
+  bool steered = false;                  // a Control Module steered the base
+  std::optional<NoiseLeft> noiseLeft;    // by the base, when a Control Module could steer it
 };
 
 class Denoiser {
