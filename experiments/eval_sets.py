@@ -18,6 +18,7 @@ Sets (missing ones are skipped with a note):
 """
 
 import argparse
+import datetime
 import glob
 import json
 import os
@@ -110,27 +111,113 @@ def evaluate(args, extra):
         json.dump({"name": args.name, "flags": extra, "rows": rows}, f, indent=1)
 
 
-def table(args, names):
+def load_results(work, names):
     results = {}
     for name in names:
-        with open(os.path.join(args.work, name, "metrics.json")) as f:
+        with open(os.path.join(work, name, "metrics.json")) as f:
             results[name] = {(r["set"], r["scene"], r["spp"]): r for r in json.load(f)["rows"]}
+    return results
+
+
+def table_lines(results, names):
+    """Mean PSNR / FLIP / L1 per set and spp, and the largest loss of the last method against
+    the one before it."""
     keys = sorted(set.intersection(*(set(r) for r in results.values())))
-    groups = sorted({(k[0], k[2]) for k in keys}, key=lambda g: (g[0], g[1]))
-    print("| set | spp | frames | " + " | ".join(f"{n} PSNR / FLIP / L1" for n in names) + " |")
-    print("|---|---|---|" + "---|" * len(names))
+    groups = sorted({(k[0], k[2]) for k in keys})
+    lines = ["| set | spp | frames | " + " | ".join(f"{n} PSNR / FLIP / L1" for n in names) + " |",
+             "|---|---|---|" + "---|" * len(names)]
     for group, spp in groups:
         ks = [k for k in keys if k[0] == group and k[2] == spp]
         cells = []
         for n in names:
             mean = {m: sum(results[n][k][m] for k in ks) / len(ks) for m in METRICS}
             cells.append(f"{mean['psnr']:.2f} / {mean['flip']:.4f} / {mean['l1']:.4f}")
-        print(f"| {group} | {spp} | {len(ks)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {group} | {spp} | {len(ks)} | " + " | ".join(cells) + " |")
     if len(names) >= 2:
         a, b = names[-1], names[-2]
         worst = min(keys, key=lambda k: results[a][k]["psnr"] - results[b][k]["psnr"])
         d = results[a][worst]["psnr"] - results[b][worst]["psnr"]
-        print(f"\nlargest PSNR loss of {a} against {b}: {d:+.2f} dB on {worst[0]}/{worst[1]} spp{worst[2]}")
+        lines += ["", f"Largest PSNR loss of {a} against {b} on one frame: {d:+.2f} dB "
+                      f"({worst[0]}/{worst[1]}, {worst[2]} spp)."]
+    return lines
+
+
+def figure_lines(args, names, spec, folder, results_path):
+    """A PNG strip: the input, OIDN's result, the last method's, the reference (one set/scene/spp)."""
+    import numpy as np
+    from PIL import Image
+    from exrutil import read_color
+    from report import figure_tonemap
+
+    where, spp = spec.rsplit(":", 1)
+    group, scene = where.split("/")
+    pair = next((p for p in evaldata_pairs(args.evaldata) if p[:3] == (group, scene, int(spp))), None)
+    if pair is None:
+        sys.exit(f"eval_sets: --figure {spec}: no such evaluation render in {args.evaldata}")
+    source, reference = pair[3], pair[4]
+    panels = [("noisy", source)]
+    shown = [n for n in ("oidn", names[-1]) if n in names and n != "noisy"]
+    panels += [(n, os.path.join(args.work, n, f"{group}_{scene}_spp{spp}.exr")) for n in shown]
+    panels.append(("reference", reference))
+    images = [figure_tonemap(read_color(path)) for _, path in panels]
+    gap = np.full((images[0].shape[0], 4, 3), 255, np.uint8)
+    strip = np.concatenate([x for image in images for x in (image, gap)][:-1], axis=1)
+    os.makedirs(folder, exist_ok=True)
+    png = os.path.join(folder, f"{group}_{scene}_spp{spp}.png")
+    Image.fromarray(strip).save(png, optimize=True)
+    relative = os.path.relpath(png, os.path.dirname(os.path.abspath(results_path)))
+    return [f"{group}/{scene} at {spp} spp, left to right: " + " | ".join(n for n, _ in panels) + ":", "",
+            f"![{group} {scene} {spp} spp]({relative})"]
+
+
+SECTION_BEGIN = "<!-- eval_sets.py: begin -->"
+SECTION_END = "<!-- eval_sets.py: end -->"
+
+
+def write_section(path, lines):
+    """Puts `lines` between the markers in `path` (appended the first time); report.py keeps them."""
+    old = open(path).read() if os.path.exists(path) else ""
+    section = "\n".join([SECTION_BEGIN, *lines, SECTION_END])
+    if SECTION_BEGIN in old:
+        head, rest = old.split(SECTION_BEGIN, 1)
+        new = head + section + rest.split(SECTION_END, 1)[1]
+    else:
+        new = old.rstrip() + "\n\n" + section + "\n"
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as f:
+        f.write(new)
+    os.replace(tmp, path)
+
+
+def table(args, names):
+    results = load_results(args.work, names)
+    lines = table_lines(results, names)
+    if not args.results:
+        print("\n".join(lines))
+        return
+    flags = {n: json.load(open(os.path.join(args.work, n, "metrics.json")))["flags"] for n in names}
+    commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True).stdout.strip()
+    section = ["## Every evaluation set: other renderers and splatted noise", "",
+               f"Generated by `experiments/eval_sets.py` on {datetime.date.today()} at commit `{commit}`; "
+               "`report.py` keeps this section. Each method was scored with",
+               "", "```sh"]
+    section += [f"python3 experiments/eval_sets.py --name {n}"
+                + (" --oidn" if n == "oidn" else "") + (" -- " + " ".join(flags[n]) if flags[n] else "")
+                for n in names]
+    section += [f"python3 experiments/eval_sets.py --table {' '.join(names)} --results docs/RESULTS.md"
+                + "".join(f" --figure {f}" for f in args.figure), "```", "",
+                "Sets: `test`, the Cycles 3.4 test split; `user`, the hand-built Blender scenes "
+                "(experiments/user_scenes.py); `blender5`, `mitsuba_box` (independent noise) and "
+                "`mitsuba_gauss` (Mitsuba's default Gaussian pixel filter, which splats samples and "
+                "correlates the noise) from experiments/render_evaldata.sh. Methods: `noisy`, the input; "
+                "`oidn`, OIDN 2.5.1 itself (pyoidn, colour + albedo + normal); a method run with no flags is "
+                "`dndenoise`'s default. Means over frames; FLIP and L1 lower is better.", ""]
+    section += lines
+    for spec in args.figure:
+        section += [""] + figure_lines(args, names, spec, os.path.join(ROOT, "docs", "results"), args.results)
+    write_section(args.results, section)
+    print(f"eval_sets: wrote the section into {args.results}")
 
 
 def main():
@@ -138,6 +225,9 @@ def main():
     p.add_argument("--name", help="name of the method (output subfolder)")
     p.add_argument("--oidn", action="store_true", help="run OIDN (pyoidn) instead of dndenoise")
     p.add_argument("--table", nargs="+", metavar="NAME", help="print a table of stored results")
+    p.add_argument("--results", help="with --table: write it into this file's eval_sets section instead")
+    p.add_argument("--figure", action="append", default=[], metavar="SET/SCENE:SPP",
+                   help="with --results: a picture of each method on this evaldata render")
     p.add_argument("--test-split", default="/work/data/scenes/test")
     p.add_argument("--user", nargs="*", default=["/work/agree/user"])
     p.add_argument("--evaldata", default="/work/evaldata")

@@ -549,6 +549,15 @@ def limitations(run):
     return lines + [""]
 
 
+def kept_section(path):
+    """The section that eval_sets.py wrote into the old report, if any (it has its own command)."""
+    old = open(path).read() if os.path.exists(path) else ""
+    begin, end = "<!-- eval_sets.py: begin -->", "<!-- eval_sets.py: end -->"
+    if begin not in old or end not in old:
+        return []
+    return ["", begin + old.split(begin, 1)[1].split(end, 1)[0] + end]
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--plan", required=True)
@@ -567,6 +576,7 @@ def main():
     lines += fvvdp_section(data)
     lines += figures(data, means, args.figures, args.results)
     lines += limitations(data)
+    lines += kept_section(args.results)
     tmp = f"{args.results}.tmp{os.getpid()}"
     with open(tmp, "w") as f:
         f.write("\n".join(lines).rstrip() + "\n")
