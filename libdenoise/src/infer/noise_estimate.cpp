@@ -39,7 +39,7 @@ torch::Tensor flatPixels(const FrameBuffers& frame, const std::vector<std::strin
   const auto guide =
       normalizedAuxRegion(frame, features, tonemap::Curve::Log, y0, 0, rows, frame.width, 1.0);
   const auto edge = std::get<0>(highPass(guide).abs().max(1, true));
-  return (edge < kFeatureEdge).to(torch::kFloat64);
+  return (edge < kFeatureEdge).to(torch::kFloat32);
 }
 
 }  // namespace
@@ -54,11 +54,14 @@ NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& outp
   double inputSum = 0, outputSum = 0;
   for (int64_t y0 = 0; y0 + 2 < height; y0 += kStripRows) {
     const int64_t rows = std::min(kStripRows + 2, height - y0);
-    const auto flat = features.empty() ? torch::ones({1, 1, rows - 2, width - 2}, torch::kFloat64)
+    const auto flat = features.empty() ? torch::ones({1, 1, rows - 2, width - 2})
                                        : flatPixels(frame, features, y0, rows);
+    // Single precision per pixel (a ratio of sums is wanted), double sums.
     auto energy = [&](const torch::Tensor& image) {
-      return (highPass(image.narrow(2, y0, rows).to(torch::kFloat64)).pow(2) * flat)
-          .sum()
+      return highPass(image.narrow(2, y0, rows).to(torch::kFloat32))
+          .square_()
+          .mul_(flat)
+          .sum(torch::kFloat64)
           .item<double>();
     };
     inputSum += energy(input);
