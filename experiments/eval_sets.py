@@ -6,6 +6,7 @@ pixel filters), at 4, 16 and 64 spp. Mean L1, PSNR, SSIM and FLIP per set and
 spp, as dnmetrics computes them; per-file metrics in WORK/<name>/metrics.json.
 
   eval_sets.py --name oidn --oidn                      OIDN 2 itself (pyoidn, colour + albedo + normal)
+  eval_sets.py --name oidn_alb --oidn -- --aux albedo  OIDN with colour + albedo (oidn_denoise.py flags)
   eval_sets.py --name noisy                            the input
   eval_sets.py --name ctl -- --model /work/train/diff.dnm --sigmas 0.05,0.02   dndenoise with these flags
   eval_sets.py --table noisy oidn ctl                  a Markdown table of stored results
@@ -100,7 +101,7 @@ def evaluate(args, extra):
             result = os.path.join(out_dir, f"{group}_{scene}_spp{spp}.exr")
             if args.oidn:
                 run([sys.executable, os.path.join(HERE, "oidn_denoise.py"), "--threads", str(args.threads),
-                     source, "-o", result])
+                     *extra, source, "-o", result])
             else:
                 run([os.path.join(args.bin, "dndenoise"), "--rgb-only", "--float", "--threads",
                      str(args.threads), *extra, source, "-o", result])
