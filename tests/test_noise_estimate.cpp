@@ -85,6 +85,10 @@ TEST_CASE("the noise a denoiser leaves, as a fraction of its input's") {
   const NoiseLeft kept = measureNoiseLeft(clean + splat, clean + splat, none);
   CHECK(kept.fraction() == doctest::Approx(1.0));
   CHECK(correlatedNoiseLeft(kept));
+  // Albedo textured everywhere: too few flat pixels, so every pixel counts.
+  const FrameBuffers textured = frameWith(0.5 + gaussian(96, 96, 0.2, 7));
+  CHECK(measureNoiseLeft(noisy, clean + 0.5 * (noisy - clean), textured).fraction() ==
+        doctest::Approx(0.5).epsilon(1e-6));
   // Too small to measure.
   CHECK(measureNoiseLeft(torch::rand({1, 3, 2, 2}), torch::rand({1, 3, 2, 2}), none).fraction() ==
         0.0);

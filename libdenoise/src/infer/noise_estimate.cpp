@@ -49,26 +49,26 @@ NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& outp
   torch::NoGradGuard noGrad;
   const std::vector<std::string> features = featureBuffers(frame);
   const int64_t height = input.size(2), width = input.size(3);
-  NoiseLeft left;
-  if (height < 3 || width < 3) return left;
-  double inputSum = 0, outputSum = 0;
+  if (height < 3 || width < 3) return {};
+  NoiseLeft flat, all;
+  double flatCount = 0, allCount = 0;
   for (int64_t y0 = 0; y0 + 2 < height; y0 += kStripRows) {
     const int64_t rows = std::min(kStripRows + 2, height - y0);
-    const auto flat = features.empty() ? torch::ones({1, 1, rows - 2, width - 2})
-                                       : flatPixels(frame, features, y0, rows);
     // Single precision per pixel (a ratio of sums is wanted), double sums.
-    auto energy = [&](const torch::Tensor& image) {
-      return highPass(image.narrow(2, y0, rows).to(torch::kFloat32))
-          .square_()
-          .mul_(flat)
-          .sum(torch::kFloat64)
-          .item<double>();
-    };
-    inputSum += energy(input);
-    outputSum += energy(output);
+    const auto in = highPass(input.narrow(2, y0, rows).to(torch::kFloat32)).square_();
+    const auto out = highPass(output.narrow(2, y0, rows).to(torch::kFloat32)).square_();
+    all.input += in.sum(torch::kFloat64).item<double>();
+    all.output += out.sum(torch::kFloat64).item<double>();
+    allCount += double(in.size(2) * in.size(3));
+    if (features.empty()) continue;
+    const auto mask = flatPixels(frame, features, y0, rows);
+    flat.input += (in * mask).sum(torch::kFloat64).item<double>();
+    flat.output += (out * mask).sum(torch::kFloat64).item<double>();
+    flatCount += mask.sum(torch::kFloat64).item<double>();
   }
-  left.input = std::sqrt(inputSum);
-  left.output = std::sqrt(outputSum);
+  NoiseLeft left = flatCount >= kMinMaskedFraction * allCount ? flat : all;
+  left.input = std::sqrt(left.input);
+  left.output = std::sqrt(left.output);
   return left;
 }
 

@@ -26,8 +26,9 @@ constexpr double kFeatureEdge = 0.05;
 double estimateNoise(const torch::Tensor& image, const FrameBuffers& frame);
 
 // How much of its input's noise a denoiser left: the high-pass energy that
-// estimateNoise measures, on the same flat pixels, of its input and of its
-// output (root of the sums; only their ratio means anything). OIDN's network
+// estimateNoise measures, on the same flat pixels (all of them when under 5 %
+// are flat), of its input and of its output (root of the sums; only their
+// ratio means anything). OIDN's network
 // removes independent per-pixel noise and leaves most of the noise of a pixel
 // filter that splats samples, which correlates neighbours and looks like detail.
 struct NoiseLeft {
