@@ -44,6 +44,8 @@ CASES = [
     Case("--exposure 0", D + " --exposure 0 {frame} -o {w}/x.exr", 1, "--exposure"),
     Case("--exposure 1e300", D + " --exposure 1e300 {frame} -o {w}/x.exr", 1, "--exposure"),
     Case("--eta nan", D + " --eta nan {frame} -o {w}/x.exr", 1, "finite"),
+    Case("--control maybe", D + " --control maybe {frame} -o {w}/x.exr", 1, "--control must be auto, on or off",
+         absent=("{w}/x.exr",)),
     Case("--eta 2", D + " --eta 2 {frame} -o {w}/x.exr", 1, "--eta must be between 0 and 1"),
     Case("--tile 1 fails at once", D + " --tile 1 {frame} -o {w}/x.exr", 1, "--tile must be between 16",
          absent=("{w}/x.exr",)),
