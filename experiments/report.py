@@ -24,6 +24,7 @@ import sys
 import numpy as np
 from PIL import Image
 
+from eval_sets import SECTION_BEGIN, SECTION_END
 from exrutil import read_color
 from metrics_io import HIGHER_IS_BETTER, case_path, load_case_metrics
 
@@ -552,10 +553,9 @@ def limitations(run):
 def kept_section(path):
     """The section that eval_sets.py wrote into the old report, if any (it has its own command)."""
     old = open(path).read() if os.path.exists(path) else ""
-    begin, end = "<!-- eval_sets.py: begin -->", "<!-- eval_sets.py: end -->"
-    if begin not in old or end not in old:
+    if SECTION_BEGIN not in old or SECTION_END not in old:
         return []
-    return ["", begin + old.split(begin, 1)[1].split(end, 1)[0] + end]
+    return ["", SECTION_BEGIN + old.split(SECTION_BEGIN, 1)[1].split(SECTION_END, 1)[0] + SECTION_END]
 
 
 def main():
