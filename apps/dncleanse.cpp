@@ -11,6 +11,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <memory>
 #include <set>
 
 #include <unistd.h>
@@ -21,6 +23,7 @@
 #include "common/progress.h"
 #include "common/version.h"
 #include "dn/data/dataset.h"
+#include "dn/infer/denoiser.h"
 #include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
@@ -35,7 +38,7 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 const char* kUsage = R"(usage: dncleanse train --data DIR --out MODEL [options]
-       dncleanse apply --model MODEL --data DIR [--force] [--source a|b]
+       dncleanse apply --model MODEL --data DIR [--force] [--source a|b|mean]
        dncleanse IN.exr -o OUT.exr --model MODEL [--layer NAME] [--rgb-only]
        dncleanse --version
 
@@ -43,6 +46,8 @@ A kernel-predicting network (Isik et al. 2021, no temporal terms) trained with
 SMAPE. --task cleanse (default) learns ground truth -> the other ground truth
 (Noise2Noise), and `apply` writes gt_clean.exr beside every frame of a data set;
 --task denoise learns low-spp input -> clean target (the "Isik" baseline).
+`apply` also takes a denoiser model (models/oidn.dnm, the pretrained base): it
+denoises the ground truth with the frame's own albedo and normal.
 
 train options:
   --data DIR             data set (docs/dataset.md); frames of --train-split
@@ -71,7 +76,8 @@ train options:
   --threads N            compute threads, 1-1024 (default 2)
 apply options:
   --force                recompute frames that already have gt_clean.exr
-  --source a|b           which ground truth to cleanse (default a)
+  --source a|b|mean      which ground truth to cleanse (default a; mean: the
+                         mean of both, denoiser models only)
 single-file options:
   -o OUT                 output file: the input's layers plus the result layer
   --layer NAME           result layer (default Cleansed or Denoised, by the model's task)
@@ -459,6 +465,35 @@ Image finiteResult(Image result, const std::string& name) {
   return result;
 }
 
+// Cleanses one frame's ground truth with a kernel model (the Noise2Noise cleanser).
+Image cleanseWithKernelNet(LoadedKernelModel& model, const fs::path& dir,
+                           const std::string& source) {
+  ReadOptions read;
+  read.only = requiredBuffers(model.info.net);
+  return runKernelNet(model.net, readFrame((dir / ("gt_" + source + ".exr")).string(), read));
+}
+
+// Cleanses with a denoiser model (the pretrained base) given the ground truth's
+// own albedo and normal; `mean` averages the colour of both ground truths first.
+Image cleanseWithDenoiser(const Denoiser& denoiser, const fs::path& dir,
+                          const std::string& source) {
+  FrameBuffers frame = readFrame((dir / (source == "b" ? "gt_b.exr" : "gt_a.exr")).string());
+  if (source == "mean") {
+    ReadOptions colorOnly;
+    colorOnly.only = {"color"};
+    const std::string other = (dir / "gt_b.exr").string();
+    const FrameBuffers second = readFrame(other, colorOnly);
+    const Image& b = second.get("color");
+    Image& a = frame.buffers.at("color");
+    if (a.width != b.width || a.height != b.height || a.channels != b.channels)
+      throw IoError(other + ": not the size of gt_a.exr");
+    for (size_t i = 0; i < a.pixels.size(); ++i) a.pixels[i] = 0.5f * (a.pixels[i] + b.pixels[i]);
+  }
+  DenoiseOptions options;
+  options.control = ControlUse::Never;
+  return denoiser.denoise(frame, options).color;
+}
+
 int runApply(cli::Args& args, int argc, char** argv) {
   std::string model_path, data_dir, source = "a";
   bool force = false;
@@ -479,17 +514,28 @@ int runApply(cli::Args& args, int argc, char** argv) {
   }
   if (model_path.empty() || data_dir.empty())
     throw cli::UsageError("apply needs --model and --data");
-  if (source != "a" && source != "b") throw cli::UsageError("--source must be a or b");
+  if (source != "a" && source != "b" && source != "mean")
+    throw cli::UsageError("--source must be a, b or mean");
   cli::checkReadable(model_path);
   torch::set_num_threads(threads);
-  auto model = loadKernelModel(model_path);
+  std::function<Image(const fs::path&)> cleanse;
+  if (archiveKind(model_path) == "model") {
+    auto denoiser = std::make_shared<Denoiser>(Denoiser::fromFile(model_path));
+    cleanse = [denoiser, source](const fs::path& dir) {
+      return cleanseWithDenoiser(*denoiser, dir, source);
+    };
+  } else {
+    if (source == "mean") throw cli::UsageError("--source mean needs a denoiser model");
+    auto model = std::make_shared<LoadedKernelModel>(loadKernelModel(model_path));
+    if (model->info.task != KernelTask::Cleanse)
+      throw ModelError(model_path + ": a " + kernelTaskName(model->info.task) +
+                       " model; apply --data needs a cleanse model");
+    cleanse = [model, source](const fs::path& dir) {
+      return cleanseWithKernelNet(*model, dir, source);
+    };
+  }
   cli::setToolProvenance("dncleanse", argc, argv, model_path);
-  if (model.info.task != KernelTask::Cleanse)
-    throw ModelError(model_path + ": a " + kernelTaskName(model.info.task) +
-                     " model; apply --data needs a cleanse model");
   const auto frames = data::scanDataset(data_dir);
-  ReadOptions read;
-  read.only = requiredBuffers(model.info.net);
   int written = 0, skipped = 0;
   const auto start = Clock::now();
   cli::Progress progress(stderr);
@@ -500,8 +546,7 @@ int runApply(cli::Args& args, int argc, char** argv) {
       ++skipped;
       continue;
     }
-    const auto frame = readFrame((dir / ("gt_" + source + ".exr")).string(), read);
-    writeImage(out, finiteResult(runKernelNet(model.net, frame), out), false, {"R", "G", "B"});
+    writeImage(out, finiteResult(cleanse(dir), out), false, {"R", "G", "B"});
     ++written;
     const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
     progress.update(double(i + 1) / frames.size(), fmt::format("frame {}/{}  {:.2f} s/frame", i + 1,

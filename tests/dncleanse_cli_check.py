@@ -52,6 +52,7 @@ def make_dataset(root, rng, size=24):
             noisy = lambda: clean * rng.exponential(1.0, clean.shape)  # noqa: E731
             for name in ("gt_a", "gt_b", "spp4_00", "spp4_01"):
                 write_frame(os.path.join(d, name + ".exr"), noisy(), albedo, normal)
+            write_rgb(os.path.join(d, "truth.exr"), clean)  # not a data-set file: for scoring
             with open(os.path.join(d, "meta.json"), "w") as f:
                 f.write("{}\n")
 
@@ -66,6 +67,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--dncleanse", required=True)
     ap.add_argument("--work-dir", required=True)
+    ap.add_argument("--oidn-model", help="models/oidn.dnm: apply cleanses with the pretrained base")
     args = ap.parse_args()
     tool, w = args.dncleanse, args.work_dir
     shutil.rmtree(w, ignore_errors=True)
@@ -144,6 +146,21 @@ def main():
     check("apply --force: rewrites", out.returncode == 0 and "wrote 3" in out.stderr, out.stderr)
     check("apply: no temporary files left",
           not any(".tmp" in f for _, _, fs in os.walk(data) for f in fs))
+
+    # --- apply with the pretrained base: the mean of both ground truths, denoised
+    if args.oidn_model:
+        out = run([tool, "apply", "--model", args.oidn_model, "--data", data, "--source", "mean", "--force"])
+        check("apply with the base: exit 0, wrote 3", out.returncode == 0 and "wrote 3" in out.stderr, out.stderr)
+        errors = []
+        for f in frames:
+            d = os.path.dirname(f)
+            truth = read_rgb(os.path.join(d, "truth.exr"))
+            raw = 0.5 * (read_rgb(os.path.join(d, "gt_a.exr")) + read_rgb(os.path.join(d, "gt_b.exr")))
+            errors.append((np.abs(read_rgb(f) - truth).mean(), np.abs(raw - truth).mean()))
+        check("apply with the base: closer to the truth than the raw mean of both, on every frame",
+              all(cleansed < 0.5 * raw for cleansed, raw in errors), str(errors))
+        expect_error("--source mean with a kernel model",
+                     [tool, "apply", "--model", p("full.pt"), "--data", data, "--source", "mean"], "mean")
 
     # --- one file: a layer next to the input's layers; the input is untouched
     before = open(src, "rb").read()

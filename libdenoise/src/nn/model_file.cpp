@@ -359,6 +359,14 @@ void writeArchiveFile(const std::string& path, const std::string& kind, const st
   });
 }
 
+std::string archiveKind(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string magic, key, kind;
+  if (!in || !std::getline(in, magic) || magic != kMagic || !(in >> key >> kind) || key != "kind")
+    throw ModelError(path + ": not a model file (unknown header)");
+  return kind;
+}
+
 ArchiveFile readArchiveFile(const std::string& path, const std::string& kind) {
   const std::string data = readWholeFile(path);
   size_t pos = 0;

@@ -102,6 +102,9 @@ struct ArchiveFile {
   torch::serialize::InputArchive archive;
 };
 ArchiveFile readArchiveFile(const std::string& path, const std::string& kind);
+// The kind a container file holds ("model", "kernel-model", ...) from its header
+// alone; throws ModelError when the file is not such a container.
+std::string archiveKind(const std::string& path);
 
 // Loads `module`'s parameters and buffers from `archive`, checking every shape
 // against the module's own; throws ModelError naming `source` on any mismatch.
