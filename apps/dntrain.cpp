@@ -123,6 +123,8 @@ options:
   --checkpoint-minutes M  checkpoint interval (default 5)
   --resume              continue from the checkpoint if it exists (same data order)
   --threads N           CPU threads for the network and the loader, 1-1024
+  --cache-gb N          decoded frames kept in memory (default 4); a set that does not
+                        fit is decoded again and again, several times slower
   --world-size N --rank R  data-parallel training over N processes (default 1 0):
                         each rank draws its own --batch (global batch N x batch) and
                         gradients are averaged; rank 0 writes log, checkpoint, model
@@ -142,6 +144,7 @@ struct Options {
   std::vector<std::string> photos, noiseReference;
   std::string aux = "default", prediction = "eps", sigmas = "0.05,0.02";
   int64_t hintChannels = 32;
+  int64_t cacheGb = 4;
   std::vector<int> spp = {4, 16, 64};
   int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
           resBlocks = 0, defaultSkip = -1, defaultSpp = -1;
@@ -208,6 +211,8 @@ Options parseArgs(int argc, char** argv) {
       o.sigmas = args.value("--sigmas");
     else if (args.flag("--hint-channels"))
       o.hintChannels = args.intValue("--hint-channels", 1, 1024);
+    else if (args.flag("--cache-gb"))
+      o.cacheGb = args.intValue("--cache-gb", 1, 1024);
     else if (args.flag("--steps"))
       o.steps = args.intValue("--steps", 1, INT32_MAX);
     else if (args.flag("--batch"))
@@ -492,6 +497,7 @@ class BatchSource {
       lo.batchSize = static_cast<int>(renderedPerBatch());
       lo.seed = seed_;
       lo.threads = 2;
+      lo.cacheBytes = std::size_t(o.cacheGb) << 30;
       loader_ = std::make_unique<data::Loader>(
           scanRoots(o.data, split), so, lo,
           static_cast<std::uint64_t>(startStep * renderedPerBatch()));

@@ -2,10 +2,10 @@
 """How clean is the training target? Raw ground truth against cleansed, scored on a
 much higher-spp reference (docs/dncleanse.md, "Which target").
 
-  python3 experiments/cleanse_table.py --data /work/data/train --ref /work/data/ref2048 \
-      --bin build/bin --model models/oidn.dnm
+  python3 experiments/cleanse_table.py --data /work/data/train /work/data/gt32 \
+      --ref /work/data/ref2048 --bin build/bin --model models/oidn.dnm
 
---data is a data set (gt_a.exr and gt_b.exr per frame); --ref holds the same
+--data are data sets (gt_a.exr and gt_b.exr per frame); --ref holds the same
 scenes and frames rendered once at a higher spp with another --seed-tag
 (make_dataset.py --gt-count 1). Each candidate target is scored with dnmetrics
 against the reference: relMSE (linear), PSNR (Reinhard) and FLIP.
@@ -54,31 +54,21 @@ def cleanse(dncleanse, model, data, source):
                     "--threads", "2"], check=True, capture_output=True)
 
 
-def main():
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", required=True)
-    p.add_argument("--ref", required=True)
-    p.add_argument("--bin", default="build/bin")
-    p.add_argument("--model", default="models/oidn.dnm", help="the cleanser given to dncleanse apply")
-    a = p.parse_args()
-
-    frames = [f for f in frames_of(a.ref) if os.path.isfile(os.path.join(a.data, f, "meta.json"))]
-    if not frames:
-        exrutil.fail(f"{a.ref}: no frame that {a.data} has too")
-    gt_spp, ref_spp = spp_of(os.path.join(a.data, frames[0])), spp_of(os.path.join(a.ref, frames[0]))
+def score_targets(a, data, frames):
+    """{label: [metrics per frame]} of the raw and the cleansed targets of one data set."""
+    gt_spp = spp_of(os.path.join(data, frames[0]))
     dnmetrics, dncleanse = os.path.join(a.bin, "dnmetrics"), os.path.join(a.bin, "dncleanse")
-
     work = tempfile.mkdtemp(prefix="cleanse_table.")
     try:
         # A data set of links to the chosen frames, which dncleanse apply cleanses in place.
         for f in frames:
             os.makedirs(os.path.join(work, "set", f))
             for name in ("gt_a.exr", "gt_b.exr", "meta.json"):
-                os.symlink(os.path.abspath(os.path.join(a.data, f, name)), os.path.join(work, "set", f, name))
-            a_rgb = exrutil.read_color(os.path.join(a.data, f, "gt_a.exr"))
-            b_rgb = exrutil.read_color(os.path.join(a.data, f, "gt_b.exr"))
+                os.symlink(os.path.abspath(os.path.join(data, f, name)), os.path.join(work, "set", f, name))
+            a_rgb = exrutil.read_color(os.path.join(data, f, "gt_a.exr"))
+            b_rgb = exrutil.read_color(os.path.join(data, f, "gt_b.exr"))
             exrutil.write_rgb(os.path.join(work, "set", f, "mean.exr"), 0.5 * (a_rgb + b_rgb))
-        candidates = {f"raw, one render ({gt_spp} spp)": lambda f: os.path.join(a.data, f, "gt_a.exr"),
+        candidates = {f"raw, one render ({gt_spp} spp)": lambda f: os.path.join(data, f, "gt_a.exr"),
                       f"raw, mean of two ({2 * gt_spp} spp)": lambda f: os.path.join(work, "set", f, "mean.exr")}
         for source, label in (("a", f"OIDN-cleansed, one render ({gt_spp} spp)"),
                               ("mean", f"OIDN-cleansed, mean of two ({2 * gt_spp} spp)")):
@@ -87,13 +77,28 @@ def main():
                 d = os.path.join(work, "set", f)
                 os.replace(os.path.join(d, "gt_clean.exr"), os.path.join(d, f"clean_{source}.exr"))
             candidates[label] = lambda f, s=source: os.path.join(work, "set", f, f"clean_{s}.exr")
-
-        results = {label: [score(dnmetrics, os.path.join(a.ref, f, "gt_a.exr"), path(f)) for f in frames]
-                   for label, path in candidates.items()}
+        return {label: [score(dnmetrics, os.path.join(a.ref, f, "gt_a.exr"), path(f)) for f in frames]
+                for label, path in candidates.items()}
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
-    print(f"{len(frames)} frames of {a.data}, against one {ref_spp}-spp render of each ({a.ref}):\n")
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", required=True, nargs="+", help="data sets whose targets are compared")
+    p.add_argument("--ref", required=True)
+    p.add_argument("--bin", default="build/bin")
+    p.add_argument("--model", default="models/oidn.dnm", help="the cleanser given to dncleanse apply")
+    a = p.parse_args()
+
+    frames = [f for f in frames_of(a.ref) if all(os.path.isfile(os.path.join(d, f, "meta.json")) for d in a.data)]
+    if not frames:
+        exrutil.fail(f"{a.ref}: no frame that every --data set has")
+    ref_spp = spp_of(os.path.join(a.ref, frames[0]))
+    results = {}
+    for data in a.data:
+        results.update(score_targets(a, data, frames))
+    print(f"{len(frames)} frames, against one {ref_spp}-spp render of each ({a.ref}):\n")
     print("| target | relMSE (median) | relMSE (mean) | PSNR (dB) | FLIP |")
     print("|---|---:|---:|---:|---:|")
     for label, rows in results.items():
