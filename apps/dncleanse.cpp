@@ -38,7 +38,7 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 const char* kUsage = R"(usage: dncleanse train --data DIR --out MODEL [options]
-       dncleanse apply --model MODEL --data DIR [--force] [--source a|b|mean]
+       dncleanse apply --model MODEL --data DIR [--force] [--source a|b|mean] [--split NAME]
        dncleanse IN.exr -o OUT.exr --model MODEL [--layer NAME] [--rgb-only]
        dncleanse --version
 
@@ -78,6 +78,7 @@ apply options:
   --force                recompute frames that already have gt_clean.exr
   --source a|b|mean      which ground truth to cleanse (default a; mean: the
                          mean of both, denoiser models only)
+  --split NAME           only this split's frames (default: every split)
 single-file options:
   -o OUT                 output file: the input's layers plus the result layer
   --layer NAME           result layer (default Cleansed or Denoised, by the model's task)
@@ -495,7 +496,7 @@ Image cleanseWithDenoiser(const Denoiser& denoiser, const fs::path& dir,
 }
 
 int runApply(cli::Args& args, int argc, char** argv) {
-  std::string model_path, data_dir, source = "a";
+  std::string model_path, data_dir, source = "a", split;
   bool force = false;
   int threads = 2;
   while (!args.done()) {
@@ -507,6 +508,8 @@ int runApply(cli::Args& args, int argc, char** argv) {
       force = true;
     else if (args.flag("--source"))
       source = args.value("--source");
+    else if (args.flag("--split"))
+      split = args.value("--split");
     else if (args.flag("--threads"))
       threads = args.intValue("--threads", 1, 1024);
     else
@@ -535,7 +538,7 @@ int runApply(cli::Args& args, int argc, char** argv) {
     };
   }
   cli::setToolProvenance("dncleanse", argc, argv, model_path);
-  const auto frames = data::scanDataset(data_dir);
+  const auto frames = data::scanDataset(data_dir, split);
   int written = 0, skipped = 0;
   const auto start = Clock::now();
   cli::Progress progress(stderr);

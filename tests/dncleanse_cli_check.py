@@ -144,6 +144,8 @@ def main():
     time.sleep(0.05)
     out = run([tool, "apply", "--model", p("full.pt"), "--data", data, "--force"])
     check("apply --force: rewrites", out.returncode == 0 and "wrote 3" in out.stderr, out.stderr)
+    out = run([tool, "apply", "--model", p("full.pt"), "--data", data, "--force", "--split", "val"])
+    check("apply --split val: the val frame only", out.returncode == 0 and "wrote 1 gt_clean.exr" in out.stderr, out.stderr)
     check("apply: no temporary files left",
           not any(".tmp" in f for _, _, fs in os.walk(data) for f in fs))
 
