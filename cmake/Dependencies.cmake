@@ -8,6 +8,7 @@ find_package(nlohmann_json 3 REQUIRED)  # Debian: nlohmann-json3-dev
 # paths; their pkg-config files give clean imported targets.
 pkg_check_modules(OIIO REQUIRED IMPORTED_TARGET OpenImageIO)
 pkg_check_modules(OCIO REQUIRED IMPORTED_TARGET OpenColorIO)
+pkg_check_modules(IMATH REQUIRED IMPORTED_TARGET Imath)  # half floats (OpenEXR's own)
 
 if(DN_BUILD_TESTS)
   find_package(doctest REQUIRED)

@@ -7,8 +7,8 @@
 
 #include <unistd.h>
 
-#include "dn/io/buffer_io.h"
 #include "dn/data/dataset.h"
+#include "dn/io/buffer_io.h"
 
 using namespace dn;
 using namespace dn::data;
@@ -149,6 +149,25 @@ TEST_CASE("inputs average 1, 4 or 16 stacks with aux averaged over the same sele
     CHECK(s.aux.at(1, 0, 6) - s.aux.at(0, 0, 6) == doctest::Approx(1.0f));
   }
   CHECK(seen4.size() > 3);  // different stacks get picked
+}
+
+TEST_CASE("the cache keeps stacks as half floats: half's precision, half the bytes") {
+  Image values(4, 1, 1);
+  values.pixels = {0.1f, -3.14159f, 1e6f, 2e-3f};
+  const Image back = HalfImage::from(values).toImage();
+  CHECK(back.pixels[0] == doctest::Approx(0.1f).epsilon(1e-3));
+  CHECK(back.pixels[1] == doctest::Approx(-3.14159f).epsilon(1e-3));
+  CHECK(back.pixels[2] == 65504.0f);  // the largest half, not infinity
+  CHECK(back.pixels[3] == doctest::Approx(2e-3f).epsilon(1e-3));
+
+  TinyDataset set(1, 4);
+  SampleOptions options;
+  options.aux = {"albedo", "normal", "depth"};
+  options.spp = {4, 16};
+  options.crop = 8;
+  auto frame = FrameData::load(scanDataset(set.root.string())[0], options);
+  const std::size_t pixels = 12 * 10;
+  CHECK(frame->bytes() == 4 * (3 + 7) * pixels * 2 + 3 * pixels * 4);  // stacks + float target
 }
 
 TEST_CASE("the cleansing task pairs the two ground truths, swapped at random") {

@@ -5,6 +5,8 @@
 #include <numeric>
 #include <regex>
 
+#include <Imath/half.h>
+
 #include "dn/io/buffer_io.h"
 
 namespace dn::data {
@@ -87,16 +89,25 @@ Image crop(const Image& image, int x0, int y0, int w, int h) {
   return out;
 }
 
-// Mean of the same crop of several images.
-Image cropAverage(const std::vector<const Image*>& images, int x0, int y0, int w, int h) {
+float toFloat(float v) { return v; }
+float toFloat(std::uint16_t bits) { return imath_half_to_float(bits); }
+
+const float* pixelData(const Image& image, int x, int y) { return image.pixel(x, y); }
+const std::uint16_t* pixelData(const HalfImage& image, int x, int y) {
+  return image.bits.data() + (static_cast<std::size_t>(y) * image.width + x) * image.channels;
+}
+
+// Mean of the same crop of several images (Image or HalfImage).
+template <class Source>
+Image cropAverage(const std::vector<const Source*>& images, int x0, int y0, int w, int h) {
   Image out(w, h, images.front()->channels);
   const float scale = 1.0f / images.size();
-  const std::size_t rowFloats = static_cast<std::size_t>(w) * out.channels;
-  for (const Image* img : images)
+  const std::size_t rowValues = static_cast<std::size_t>(w) * out.channels;
+  for (const Source* img : images)
     for (int y = 0; y < h; ++y) {
-      const float* src = img->pixel(x0, y0 + y);
+      const auto* src = pixelData(*img, x0, y0 + y);
       float* dst = out.pixel(0, y);
-      for (std::size_t i = 0; i < rowFloats; ++i) dst[i] += src[i] * scale;
+      for (std::size_t i = 0; i < rowValues; ++i) dst[i] += toFloat(src[i]) * scale;
     }
   return out;
 }
@@ -160,6 +171,21 @@ Image orient(const Image& image, Orientation o, int normalChannel) {
   return out;
 }
 
+HalfImage HalfImage::from(const Image& image) {
+  constexpr float kHalfMax = 65504.0f;
+  HalfImage out{image.width, image.height, image.channels, {}};
+  out.bits.resize(image.pixels.size());
+  for (std::size_t i = 0; i < image.pixels.size(); ++i)
+    out.bits[i] = imath_float_to_half(std::clamp(image.pixels[i], -kHalfMax, kHalfMax));
+  return out;
+}
+
+Image HalfImage::toImage() const {
+  Image out(width, height, channels);
+  for (std::size_t i = 0; i < bits.size(); ++i) out.pixels[i] = toFloat(bits[i]);
+  return out;
+}
+
 Image average(const std::vector<const Image*>& images) {
   return cropAverage(images, 0, 0, images.front()->width, images.front()->height);
 }
@@ -188,8 +214,8 @@ std::shared_ptr<const FrameData> FrameData::load(const FrameRecord& record,
     for (int k = 0; k < record.stacks; ++k) {
       auto [color, aux] = readColorAndAux(stackPath(record.dir, record.stackSpp, k), options.aux,
                                           options.missingAuxAsZero ? &data->present_ : nullptr);
-      data->stackColor_.push_back(std::move(color));
-      data->stackAux_.push_back(std::move(aux));
+      data->stackColor_.push_back(HalfImage::from(color));
+      data->stackAux_.push_back(HalfImage::from(aux));
     }
     data->stackSpp_ = record.stackSpp;
     data->target_ = loadTarget();
@@ -230,7 +256,7 @@ Sample FrameData::draw(std::mt19937_64& rng, const SampleOptions& options) const
     std::iota(order.begin(), order.end(), 0);
     std::shuffle(order.begin(), order.end(), rng);
     order.resize(s.spp / stackSpp_);
-    std::vector<const Image*> colors, auxes;
+    std::vector<const HalfImage*> colors, auxes;
     for (int k : order) colors.push_back(&stackColor_[k]), auxes.push_back(&stackAux_[k]);
     s.color = cropAverage(colors, x0, y0, w, h);
     s.aux = cropAverage(auxes, x0, y0, w, h);
@@ -251,11 +277,12 @@ Sample FrameData::draw(std::mt19937_64& rng, const SampleOptions& options) const
 }
 
 std::size_t FrameData::bytes() const {
-  std::size_t floats =
+  const std::size_t floats =
       target_.size() + gtAColor_.size() + gtAAux_.size() + gtBColor_.size() + gtBAux_.size();
+  std::size_t halves = 0;
   for (std::size_t k = 0; k < stackColor_.size(); ++k)
-    floats += stackColor_[k].size() + stackAux_[k].size();
-  return floats * sizeof(float);
+    halves += stackColor_[k].bits.size() + stackAux_[k].bits.size();
+  return floats * sizeof(float) + halves * sizeof(std::uint16_t);
 }
 
 Loader::Loader(std::vector<FrameRecord> frames, SampleOptions sampleOptions, LoaderOptions options,

@@ -14,8 +14,8 @@
 #include <thread>
 #include <vector>
 
-#include "dn/io/buffers.h"
 #include "dn/image.h"
+#include "dn/io/buffers.h"
 
 namespace dn::data {
 
@@ -69,6 +69,17 @@ struct Sample {
   std::vector<float> present;  // per aux buffer: 1 in the frame's files, 0 filled with zeros
 };
 
+// An image stored as IEEE half floats: half the memory of Image. The cache keeps
+// the noisy stacks this way (their noise dwarfs half's 11-bit precision), so
+// twice as many frames fit; targets stay float.
+struct HalfImage {
+  int width = 0, height = 0, channels = 0;
+  std::vector<std::uint16_t> bits;  // interleaved like Image::pixels
+
+  static HalfImage from(const Image& image);  // magnitudes above 65504 clamp to it
+  Image toImage() const;
+};
+
 // All buffers of one frame that samples need, decoded once and cached.
 class FrameData {
  public:
@@ -83,7 +94,7 @@ class FrameData {
  private:
   int width_ = 0, height_ = 0, stackSpp_ = 0;
   std::vector<float> present_;
-  std::vector<Image> stackColor_, stackAux_;  // per stack
+  std::vector<HalfImage> stackColor_, stackAux_;  // per stack
   Image gtAColor_, gtAAux_, gtBColor_, gtBAux_, target_;
 };
 
