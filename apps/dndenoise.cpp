@@ -65,6 +65,10 @@ model and sampling:
   --control auto|on|off  such models: steer the base with the Control Module
                       when the base leaves correlated noise (auto, default: a
                       pixel filter that splats samples), always, or never
+  --prefilter on|off  OIDN base with albedo and normal: denoise both with OIDN's
+                      own networks first, then the colour with its network for
+                      clean aux (on, default, where the model holds them: OIDN's
+                      prefilter mode, Blender's "Accurate"); off: noisy aux as is
   --seed N            random seed >= 0 (default 0): same seed, same output
   --samples K         mean of K samples (1-256), plus their standard deviation as an
                       'uncertainty' layer
@@ -222,6 +226,10 @@ Options parseArgs(int argc, char** argv) {
         o.denoise.control = ControlUse::Never;
       else
         throw cli::UsageError("--control must be auto, on or off, got " + v);
+    } else if (args.flag("--prefilter")) {
+      const std::string v = args.value("--prefilter");
+      if (v != "on" && v != "off") throw cli::UsageError("--prefilter must be on or off, got " + v);
+      o.denoise.prefilter = v == "on";
     } else if (args.flag("--seed")) {
       o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     } else if (args.flag("--samples")) {
@@ -573,10 +581,11 @@ int run(Options o, int argc, char** argv) {
                  "dndenoise: {}: {}, exposure x{:.3g}, {} network steps, {} tile(s) of {} px, "
                  "{:.2f} s (median of {}), {:.2f} s/MPix\n",
                  name,
-                 result.steered ? (denoiser.info().oidn.control.diffusion
-                                       ? "pretrained base + Control Module, diffusion refinement"
-                                       : "pretrained base + Control Module, one pass")
-                                : "pretrained base",
+                 result.steered       ? (denoiser.info().oidn.control.diffusion
+                                             ? "pretrained base + Control Module, diffusion refinement"
+                                             : "pretrained base + Control Module, one pass")
+                 : result.prefiltered ? "pretrained base, albedo and normal prefiltered"
+                                      : "pretrained base",
                  result.exposure, result.steps, result.tileCount, result.tileSize,
                  times[times.size() / 2], times.size(),
                  times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));

@@ -649,7 +649,7 @@ int importOidnModel(const Options& o) {
              notes.at("source_version"), lib, imported.info.oidn.input_sets.size(),
              imported.info.oidn.input_sets.size() > 1 ? "s" : "");
   for (const auto& set : imported.info.oidn.input_sets)
-    fmt::print(stderr, "  {:<12} {} at offset {}, sha256 {}\n", set, notes.at(set + ".weights"),
+    fmt::print(stderr, "  {:<19} {} at offset {}, sha256 {}\n", set, notes.at(set + ".weights"),
                notes.at(set + ".blob_offset"), notes.at(set + ".blob_sha256"));
   return cli::kExitOk;
 }

@@ -124,8 +124,8 @@ int main(int argc, char** argv) {
             .contiguous(torch::MemoryFormat::ChannelsLast);
   });
   stage("network forward", [&] { y = net->forward(x); });
-  stage("oidnOutputToRadiance", [&] {
-    oidnOutputToRadiance(y.narrow(2, 0, all.height).narrow(3, 0, all.width), exposure);
+  stage("oidnOutputDecode", [&] {
+    oidnOutputDecode(y.narrow(2, 0, all.height).narrow(3, 0, all.width), *set, exposure);
   });
   OidnRunOptions options;
   options.exposure = exposure;

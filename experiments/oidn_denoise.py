@@ -5,7 +5,10 @@
                   [--aux albedo,normal|albedo|none] IN.exr... -o OUT
       HDR colour (the Combined pass) + Denoising Albedo + Denoising Normal (Mitsuba:
       albedo, normals), RT filter
-      (noisy auxiliary buffers, as rendered). --aux gives OIDN fewer buffers:
+      (noisy auxiliary buffers, as rendered). --prefilter is OIDN's prefilter mode:
+      albedo and normal denoised first (balanced quality: the default-size
+      networks), then the colour with cleanAux (the large network at the default
+      quality). --aux gives OIDN fewer buffers:
       colour + albedo, or colour alone, and OIDN picks its network for that set.
       OUT is a file for one input, or a folder (ending in /) for several: the
       results keep the inputs' file names. Each result is plain float32 RGB.
@@ -64,8 +67,24 @@ class Denoiser:
         if error:
             raise RuntimeError(f"OIDN {what} failed: {error}")
 
-    def run(self, color, albedo, normal, aux=("albedo", "normal")):
+    def prefilter(self, name, image):
+        """The albedo or normal (name) denoised by OIDN's own network for it."""
+        aux_filter = pyoidn.Filter(self.device, "RT")
+        aux_filter.set_quality(OIDN_QUALITY_BALANCED)
+        output = np.empty_like(image)
+        aux_filter.set_image(name, image, OIDN_FORMAT_FLOAT3)
+        aux_filter.set_image("output", output, OIDN_FORMAT_FLOAT3)
+        aux_filter.commit()
+        aux_filter.execute()
+        self.check("aux prefiltering")
+        return output
+
+    def run(self, color, albedo, normal, aux=("albedo", "normal"), prefilter=False):
         output = np.empty_like(color)
+        self.filter.set_bool("cleanAux", prefilter)
+        if prefilter:
+            albedo = self.prefilter("albedo", albedo)
+            normal = self.prefilter("normal", normal)
         images = {"color": color, "albedo": albedo, "normal": normal}
         for name in ("albedo", "normal"):
             if name not in aux:
@@ -94,7 +113,11 @@ def main():
     parser.add_argument("--threads", type=int, default=0, help="0: all cores (OIDN's default)")
     parser.add_argument("--aux", choices=["albedo,normal", "albedo", "none"], default="albedo,normal",
                         help="auxiliary buffers given to OIDN (default: albedo,normal)")
+    parser.add_argument("--prefilter", action="store_true",
+                        help="denoise albedo and normal first, then the colour with cleanAux")
     args = parser.parse_args()
+    if args.prefilter and args.aux != "albedo,normal":
+        parser.error("--prefilter needs --aux albedo,normal")
     outputs = output_paths(args.inputs, args.output)
     denoiser = Denoiser(args.quality, args.threads)
     for source, target in zip(args.inputs, outputs):
@@ -102,7 +125,7 @@ def main():
             fail(f"oidn_denoise: {target}: the output would replace the input")
         try:
             aux = () if args.aux == "none" else tuple(args.aux.split(","))
-            write_rgb(target, denoiser.run(*load_buffers(source), aux=aux))
+            write_rgb(target, denoiser.run(*load_buffers(source), aux=aux, prefilter=args.prefilter))
         except (ExrError, RuntimeError) as error:
             fail(f"oidn_denoise: {error}")
 

@@ -205,10 +205,15 @@ TEST_CASE("a library's blobs are named by their order and shapes") {
 
   SUBCASE("import puts each blob into its network") {
     const OidnImport imported = importOidn(lib.string(), OidnArch::Default);
-    CHECK(imported.info.oidn.input_sets ==
-          std::vector<std::string>{"hdr", "hdr_alb", "hdr_alb_nrm"});
-    // Blob i holds 1 + i / 1024 everywhere: hdr is blob 2, hdr_alb 4, hdr_alb_nrm 6.
-    const std::map<std::string, int> blobOf = {{"hdr", 2}, {"hdr_alb", 4}, {"hdr_alb_nrm", 6}};
+    CHECK(imported.info.oidn.input_sets == std::vector<std::string>{"hdr", "hdr_alb", "hdr_alb_nrm",
+                                                                    "hdr_calb_cnrm_large", "alb",
+                                                                    "nrm"});
+    CHECK(imported.base->canPrefilter());
+    CHECK(imported.base->net("hdr_calb_cnrm_large")->config().arch == OidnArch::Large);
+    // Blob i holds 1 + i / 1024 everywhere: hdr is blob 2, hdr_alb 4, hdr_alb_nrm 6, ...
+    const std::map<std::string, int> blobOf = {{"hdr", 2},         {"hdr_alb", 4},
+                                               {"hdr_alb_nrm", 6}, {"hdr_calb_cnrm_large", 10},
+                                               {"alb", 0},         {"nrm", 19}};
     for (const auto& [set, index] : blobOf) {
       CAPTURE(set);
       auto w = imported.base->net(set)->named_parameters()["dec_conv1b.bias"];
@@ -220,6 +225,7 @@ TEST_CASE("a library's blobs are named by their order and shapes") {
     CHECK(imported.info.notes.at("source").find("Open Image Denoise") != std::string::npos);
     const OidnImport large = importOidn(lib.string(), OidnArch::Large);
     CHECK(large.info.notes.at("hdr_alb_nrm.weights") == "hdr_calb_cnrm_large");
+    CHECK_FALSE(importOidn(lib.string(), OidnArch::Small).base->canPrefilter());
   }
   SUBCASE("a missing or misshapen blob is refused in one line") {
     const fs::path missing = writeTemp("fake_oidn_missing_", fakeOidnLibrary(5));
@@ -256,27 +262,51 @@ TEST_CASE("the base round-trips through a model file") {
   fs::remove(file);
 }
 
+// Measured: 146-148 dB, at most 9e-7 apart (values around 0.04): the same
+// network and arithmetic up to the order of floating-point sums.
+void checkAgreesWithOidn(const Image& ours, const std::string& layer) {
+  const Image expected = readImage(kOidnOut, 3, {layer + ".R", layer + ".G", layer + ".B"});
+  const double psnr = reinhardPsnr(ours, expected);
+  const double diff = maxAbsDifference(ours, expected);
+  MESSAGE(layer << ": " << psnr << " dB, largest difference " << diff);
+  CHECK(psnr > 90.0);
+  CHECK(diff < 1e-4);
+}
+
 TEST_CASE("the shipped base agrees with OIDN on the committed crop") {
   const Denoiser denoiser = Denoiser::fromFile(kModel);
   const FrameBuffers full = readFrame(kCrop);
+  DenoiseOptions noisyAux;
+  noisyAux.prefilter = false;
   // OIDN picks its network by the buffers it is given; so does the base.
   for (const std::string set : {"hdr", "hdr_alb", "hdr_alb_nrm"}) {
     CAPTURE(set);
     FrameBuffers frame = full;
     if (set == "hdr") frame.buffers.erase("albedo");
     if (set != "hdr_alb_nrm") frame.buffers.erase("normal");
-    const DenoiseResult result = denoiser.denoise(frame, {});
-    const Image expected = readImage(kOidnOut, 3, {set + ".R", set + ".G", set + ".B"});
+    const DenoiseResult result = denoiser.denoise(frame, noisyAux);
     CHECK(result.buffersUsed == oidnInputSet(set).buffers);
-    const double psnr = reinhardPsnr(result.color, expected);
-    const double diff = maxAbsDifference(result.color, expected);
-    MESSAGE(set << ": " << psnr << " dB, largest difference " << diff);
-    // Measured: 146-148 dB, at most 9e-7 apart (values around 0.04): the
-    // same network and arithmetic up to the order of floating-point sums.
-    CHECK(psnr > 90.0);
-    CHECK(diff < 1e-4);
+    CHECK_FALSE(result.prefiltered);
+    checkAgreesWithOidn(result.color, set);
   }
   CHECK(denoiser.missingBuffers({"albedo", "normal"}) == std::vector<std::string>{"color"});
+}
+
+TEST_CASE("the prefilter mode agrees with OIDN's: aux denoised first, then the colour") {
+  const LoadedModel model = loadModelFile(kModel);
+  REQUIRE(model.oidn->canPrefilter());
+  const FrameBuffers frame = readFrame(kCrop);
+  for (const std::string set : {"alb", "nrm"}) {
+    CAPTURE(set);
+    OidnUNet net = model.oidn->net(set);
+    const OidnRunResult out = runOidn(net, oidnInputSet(set), frame, {});
+    CHECK(out.exposure == 1.0f);  // aux buffers are not exposed
+    checkAgreesWithOidn(tensorToImage(out.image), set);
+  }
+  const DenoiseResult result = Denoiser::fromFile(kModel).denoise(frame, {});
+  CHECK(result.prefiltered);  // the default with albedo and normal
+  CHECK(result.steps == 3);
+  checkAgreesWithOidn(result.color, "prefiltered");
 }
 
 TEST_CASE("tiles agree with the whole frame") {

@@ -23,6 +23,32 @@ double noteOr(const ModelInfo& info, const std::string& key, double fallback) {
   return it == info.notes.end() ? fallback : std::stod(it->second);
 }
 
+// OIDN's prefilter mode: the albedo and the normal are denoised by their own
+// networks, then the colour by the large network trained with noise-free albedo
+// and normal. Each network is a third of the progress.
+OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame,
+                                 const OidnRunOptions& options) {
+  auto phase = [&](int k) {
+    OidnRunOptions o = options;
+    if (options.progress) o.progress = [&, k](double f) { options.progress((k + f) / 3.0); };
+    return o;
+  };
+  FrameBuffers clean;
+  clean.width = frame.width;
+  clean.height = frame.height;
+  clean.buffers["color"] = frame.get("color");
+  int k = 0;
+  for (const char* name : {"alb", "nrm"}) {
+    const OidnInputSet& set = oidnInputSet(name);
+    OidnUNet net = base->net(name);
+    net->to(options.device);
+    clean.buffers[set.denoised()] = tensorToImage(runOidn(net, set, frame, phase(k++)).image);
+  }
+  OidnUNet net = base->net("hdr_calb_cnrm_large");
+  net->to(options.device);
+  return runOidn(net, oidnInputSet("hdr_calb_cnrm_large"), clean, phase(k));
+}
+
 // Forward noise at a step in image units, sqrt((1 - alpha_bar) / alpha_bar).
 double noiseLevel(const NoiseSchedule& schedule, int64_t step) {
   const double ab = schedule.alphaBar(step);
@@ -319,9 +345,8 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
     if (options.progress) run.progress = [&, k](double f) { options.progress((k + f) / samples); };
     OidnUNet steered = model->steered();
     out = runOidn(steered, set, frame, run);
-    sum = k == 0 ? out.radiance : sum + out.radiance;
-    if (samples > 1)
-      sumSquares = k == 0 ? out.radiance.square() : sumSquares + out.radiance.square();
+    sum = k == 0 ? out.image : sum + out.image;
+    if (samples > 1) sumSquares = k == 0 ? out.image.square() : sumSquares + out.image.square();
   }
   DenoiseResult result;
   const double n = samples;
@@ -348,18 +373,24 @@ DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
   {
     c10::InferenceMode inference;
     OidnBase base = model_.oidnControlled ? model_.oidnControlled->base() : model_.oidn;
-    auto [net, set] = base->pick(frame.names());
-    net->to(options.device);
     OidnRunOptions run;
     run.device = options.device;
     run.exposure = static_cast<float>(options.exposure);
     run.tile = options.tile;
     run.maxMemoryBytes = options.maxMemoryBytes;
     run.progress = options.progress;
-    OidnRunResult out = runOidn(net, *set, frame, run);
-    result.color = tensorToImage(out.radiance);
+    auto [net, set] = base->pick(frame.names());
+    result.prefiltered = options.prefilter && base->canPrefilter() && set->buffers.size() == 3;
+    OidnRunResult out;
+    if (result.prefiltered) {
+      out = runOidnPrefiltered(base, frame, run);
+    } else {
+      net->to(options.device);
+      out = runOidn(net, *set, frame, run);
+    }
+    result.color = tensorToImage(out.image);
     result.exposure = out.exposure;
-    result.steps = 1;
+    result.steps = result.prefiltered ? 3 : 1;
     result.tileSize = out.tileSize;
     result.tileCount = out.tileCount;
     result.buffersUsed = set->buffers;
@@ -367,7 +398,7 @@ DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
       // Compared where the base works: exposed and PU-encoded.
       const torch::Tensor input = imageToTensor(frame.get("color")) * out.exposure;
       result.noiseLeft = measureNoiseLeft(puEncode(input.nan_to_num(0.0).clamp_min(0.0)),
-                                          puEncode(out.radiance * out.exposure), frame);
+                                          puEncode(out.image * out.exposure), frame);
     }
   }
   if (options.control != ControlUse::Auto || !result.noiseLeft ||

@@ -13,6 +13,15 @@ namespace {
 
 float nanToZero(float v) { return std::isnan(v) ? 0.0f : v; }
 
+// OIDN's sRGB transfer function, which its albedo network works in.
+float srgbEncode(float y) {
+  return y <= 0.0031308f ? 12.92f * y : 1.055f * std::pow(y, 1 / 2.4f) - 0.055f;
+}
+float srgbDecode(float x) {
+  return x <= 0.04045f ? x / 12.92f : std::pow((x + 0.055f) / 1.055f, 2.4f);
+}
+float encodeNormal(float v) { return std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f; }
+
 // Fills three planes of `out` (h x w each) from a 3-channel image, or from a
 // 1-channel one broadcast, as OIDN does; rows in parallel.
 template <typename Transform>
@@ -44,25 +53,35 @@ torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, floa
       fillPlanes(frame.get(name), r, out, [exposure](float v) {
         return tonemap::pu(std::clamp(v * exposure, 0.0f, std::numeric_limits<float>::max()));
       });
+    else if (name == "albedo" && b == 0)  // the albedo network's own input
+      fillPlanes(frame.get(name), r, out,
+                 [](float v) { return srgbEncode(std::clamp(v, 0.0f, 1.0f)); });
     else if (name == "albedo")
       fillPlanes(frame.get(name), r, out, [](float v) { return std::clamp(v, 0.0f, 1.0f); });
     else
-      fillPlanes(frame.get(name), r, out,
-                 [](float v) { return std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f; });
+      fillPlanes(frame.get(name), r, out, encodeNormal);
   }
   return input;
 }
 
-torch::Tensor oidnOutputToRadiance(const torch::Tensor& output, float exposure) {
+torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& set,
+                               float exposure) {
   auto out = output.to(torch::kCPU, torch::kFloat32).contiguous();
   float* p = out.data_ptr<float>();
   const float scale = exposure != 0.0f ? 1.0f / exposure : 0.0f;
   constexpr float kMax = std::numeric_limits<float>::max();
   // NaN and negatives as 0, as OIDN; what overflows float is clamped, not Inf.
-  at::parallel_for(0, out.numel(), 1 << 14, [&](int64_t begin, int64_t end) {
-    for (int64_t i = begin; i < end; ++i)
-      p[i] = std::min(tonemap::puInverse(std::max(nanToZero(p[i]), 0.0f)) * scale, kMax);
-  });
+  auto decode = [&](auto transform) {
+    at::parallel_for(0, out.numel(), 1 << 14, [&](int64_t begin, int64_t end) {
+      for (int64_t i = begin; i < end; ++i) p[i] = transform(std::max(nanToZero(p[i]), 0.0f));
+    });
+  };
+  if (set.denoised() == "color")
+    decode([&](float v) { return std::min(tonemap::puInverse(v) * scale, kMax); });
+  else if (set.denoised() == "albedo")
+    decode([](float v) { return std::min(srgbDecode(v), 1.0f); });
+  else
+    decode([](float v) { return std::clamp(v * 2.0f - 1.0f, -1.0f, 1.0f); });
   return out;
 }
 
@@ -80,8 +99,10 @@ double oidnBytesPerPixel(const OidnUNetConfig& config) {
 OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers& frame,
                       const OidnRunOptions& options) {
   OidnRunResult result;
-  result.exposure =
-      options.exposure > 0.0f ? options.exposure : tonemap::oidnExposure(frame.get("color"));
+  // Albedo and normal are denoised at their own scale, as OIDN does.
+  result.exposure = set.denoised() != "color" ? 1.0f
+                    : options.exposure > 0.0f ? options.exposure
+                                              : tonemap::oidnExposure(frame.get("color"));
   const OidnUNetConfig& config = net->config();
   const int64_t overlap = config.arch == OidnArch::Large ? kOidnOverlapLarge : kOidnOverlap;
   int64_t tile = options.tile;
@@ -105,7 +126,7 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
   result.tileCount = tiler.tiles().size();
 
   std::size_t done = 0;
-  result.radiance = tiler.apply([&](const TileRect& r) {
+  result.image = tiler.apply([&](const TileRect& r) {
     torch::Tensor x = oidnInput(frame, set, result.exposure, r);
     const int64_t padH = (kOidnAlignment - r.height % kOidnAlignment) % kOidnAlignment;
     const int64_t padW = (kOidnAlignment - r.width % kOidnAlignment) % kOidnAlignment;
@@ -115,9 +136,9 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
     torch::Tensor y = (options.network ? options.network(x, r) : net->forward(x))
                           .narrow(2, 0, r.height)
                           .narrow(3, 0, r.width);
-    torch::Tensor radiance = oidnOutputToRadiance(y, result.exposure);
+    torch::Tensor decoded = oidnOutputDecode(y, set, result.exposure);
     if (options.progress) options.progress(double(++done) / tiler.tiles().size());
-    return radiance;
+    return decoded;
   });
   return result;
 }

@@ -152,6 +152,10 @@ OidnImport importOidn(const std::string& libraryPath, OidnArch arch) {
   else {
     const std::string suffix = arch == OidnArch::Small ? "_small" : "";
     for (const char* set : {"hdr", "hdr_alb", "hdr_alb_nrm"}) sets.push_back({set, set + suffix});
+    // OIDN's prefilter mode at its default quality (it has no small albedo and
+    // normal networks, and the large colour network is what makes it pay).
+    if (arch == OidnArch::Default)
+      for (const char* set : {"hdr_calb_cnrm_large", "alb", "nrm"}) sets.push_back({set, set});
   }
   OidnImport out;
   out.info.base_kind = BaseKind::Oidn;

@@ -183,9 +183,13 @@ std::vector<int64_t> OidnUNetImpl::skipChannels() const {
 int64_t OidnUNetImpl::bottleneckChannels() const { return widthsOf(config_.arch).ec5; }
 
 const std::vector<OidnInputSet>& oidnInputSets() {
-  static const std::vector<OidnInputSet> sets = {{"hdr", {"color"}},
-                                                 {"hdr_alb", {"color", "albedo"}},
-                                                 {"hdr_alb_nrm", {"color", "albedo", "normal"}}};
+  static const std::vector<OidnInputSet> sets = {
+      {"hdr", {"color"}},
+      {"hdr_alb", {"color", "albedo"}},
+      {"hdr_alb_nrm", {"color", "albedo", "normal"}},
+      {"hdr_calb_cnrm_large", {"color", "albedo", "normal"}, true, true},
+      {"alb", {"albedo"}},
+      {"nrm", {"normal"}}};
   return sets;
 }
 
@@ -193,7 +197,7 @@ const OidnInputSet& oidnInputSet(const std::string& name) {
   for (const auto& set : oidnInputSets())
     if (set.name == name) return set;
   throw std::invalid_argument("unknown OIDN input set '" + name +
-                              "' (expected hdr, hdr_alb or hdr_alb_nrm)");
+                              "' (expected hdr, hdr_alb, hdr_alb_nrm, hdr_calb_cnrm_large, alb or nrm)");
 }
 
 OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets)
@@ -202,7 +206,9 @@ OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputS
   for (const auto& name : sets_) {
     const OidnInputSet& set = oidnInputSet(name);
     if (nets_.count(name)) throw std::invalid_argument("OIDN input set '" + name + "' given twice");
-    nets_.emplace(name, register_module(name, OidnUNet(OidnUNetConfig{arch, set.channels(), 3})));
+    const OidnArch netArch = set.large ? OidnArch::Large : arch;
+    nets_.emplace(name,
+                  register_module(name, OidnUNet(OidnUNetConfig{netArch, set.channels(), 3})));
   }
 }
 
@@ -213,10 +219,15 @@ std::pair<OidnUNet, const OidnInputSet*> OidnBaseImpl::pick(
   };
   const OidnInputSet* best = nullptr;
   for (const auto& set : oidnInputSets())
-    if (nets_.count(set.name) && std::all_of(set.buffers.begin(), set.buffers.end(), has))
+    if (set.denoised() == "color" && !set.cleanAux && nets_.count(set.name) &&
+        std::all_of(set.buffers.begin(), set.buffers.end(), has))
       best = &set;  // sets are listed poorest first
   if (!best) return {OidnUNet(nullptr), nullptr};
   return {nets_.at(best->name), best};
+}
+
+bool OidnBaseImpl::canPrefilter() const {
+  return nets_.count("alb") && nets_.count("nrm") && nets_.count("hdr_calb_cnrm_large");
 }
 
 OidnUNet OidnBaseImpl::net(const std::string& inputSet) const { return nets_.at(inputSet); }

@@ -58,6 +58,10 @@ struct DenoiseOptions {
   // base's estimate as it is).
   std::optional<std::vector<double>> sigmas;
   ControlUse control = ControlUse::Auto;
+  // OIDN base with albedo and normal: denoise both first with OIDN's own aux
+  // networks, then the colour with its network for clean aux (where the model
+  // holds those networks; OIDN's prefilter mode, Blender's "Accurate").
+  bool prefilter = true;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };
 
@@ -96,6 +100,7 @@ struct DenoiseResult {
   std::size_t tileCount = 0;
   std::vector<std::string> buffersUsed;  // the input buffers the network saw
   bool steered = false;                  // a Control Module steered the base
+  bool prefiltered = false;              // albedo and normal were denoised first
   std::optional<NoiseLeft> noiseLeft;    // by the base, when a Control Module could steer it
 };
 

@@ -3,6 +3,8 @@
 // function, albedo clamped to [0, 1], normals clamped to [-1, 1] and mapped to
 // [0, 1], NaN as 0; the frame zero-padded to a multiple of 16; the output
 // clamped at 0, decoded and scaled back. Large frames run in overlapping tiles.
+// The albedo network (set "alb") works in sRGB and the normal network ("nrm")
+// on the mapped normals, both unexposed, as OIDN denoises auxiliary images.
 #pragma once
 
 #include <cstdint>
@@ -29,8 +31,10 @@ constexpr int64_t kOidnMaxTilePixels = 2160 * 2160;
 // colour multiplied by `exposure`.
 torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
                         const TileRect& region);
-// Network output (1, 3, h, w) -> linear HDR radiance in the frame's units.
-torch::Tensor oidnOutputToRadiance(const torch::Tensor& output, float exposure);
+// Network output (1, 3, h, w) -> the set's denoised buffer in the frame's
+// units: linear HDR radiance, albedo in [0, 1] or normals in [-1, 1].
+torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& set,
+                               float exposure);
 
 struct OidnRunOptions {
   float exposure = 0.0f;          // 0: OIDN's autoexposure
@@ -44,13 +48,14 @@ struct OidnRunOptions {
 };
 
 struct OidnRunResult {
-  torch::Tensor radiance;  // (1, 3, H, W) on the CPU
+  torch::Tensor image;  // (1, 3, H, W) on the CPU: the set's denoised buffer
   float exposure = 1.0f;
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
 };
 
-// Denoises `frame` with `net`, whose inputs are `set`'s buffers.
+// Denoises `frame` (its colour, or for "alb" and "nrm" its albedo or normal)
+// with `net`, whose inputs are `set`'s buffers.
 OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers& frame,
                       const OidnRunOptions& options);
 

@@ -79,25 +79,33 @@ class OidnUNetImpl : public torch::nn::Module {
 };
 TORCH_MODULE(OidnUNet);
 
-// OIDN's HDR input sets, named as OIDN names its weights: colour alone ("hdr"),
-// + albedo ("hdr_alb"), + albedo + normal ("hdr_alb_nrm").
+// OIDN's input sets, named as OIDN names its weights: colour alone ("hdr"),
+// + albedo ("hdr_alb"), + albedo + normal ("hdr_alb_nrm"); and the networks of
+// OIDN's prefilter mode at its default quality: albedo alone ("alb"), normal
+// alone ("nrm"), and the large network for colour + prefiltered albedo +
+// normal ("hdr_calb_cnrm_large").
 struct OidnInputSet {
   std::string name;
-  std::vector<std::string> buffers;  // canonical buffer names, colour first
+  std::vector<std::string> buffers;  // canonical buffer names, the denoised one first
+  bool cleanAux = false;             // trained on noise-free albedo and normal
+  bool large = false;                // always OidnArch::Large, whatever the base's size
   int64_t channels() const { return 3 * static_cast<int64_t>(buffers.size()); }
+  const std::string& denoised() const { return buffers.front(); }
 };
 const std::vector<OidnInputSet>& oidnInputSets();
 const OidnInputSet& oidnInputSet(const std::string& name);  // throws std::invalid_argument
 
-// The pretrained base: one network per input set, all of one size, as OIDN
-// picks its weights by the buffers it is given.
+// The pretrained base: one network per input set, all of one size (but for the
+// large prefilter network), as OIDN picks its weights by the buffers it is given.
 class OidnBaseImpl : public torch::nn::Module {
  public:
   OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets);
 
-  // The network for the richest set whose buffers are all in `available`, and
-  // its set; nullptr when none fits (no colour).
+  // The colour network for the richest set whose buffers are all in `available`
+  // (noisy aux), and its set; nullptr when none fits (no colour).
   std::pair<OidnUNet, const OidnInputSet*> pick(const std::vector<std::string>& available) const;
+  // Whether the base holds the three networks of the prefilter mode.
+  bool canPrefilter() const;
   OidnUNet net(const std::string& inputSet) const;  // throws std::out_of_range
   const std::vector<std::string>& inputSets() const { return sets_; }
   // Weights in channels-last order: faster convolutions on the CPU.
