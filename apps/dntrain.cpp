@@ -50,6 +50,7 @@ const char* kUsage =
        dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--default-spp N]
                         [--exposure-target Y] [--noise-reference RENDER ...] [--out FILE]
        dntrain prior --model model.dnm --out base.dnm
+       dntrain rebase --model model.dnm --base oidn.dnm --out model2.dnm
        dntrain import-oidn [--lib PATH] [--variant default|small|large] --out FILE
 
 base     pretrains the pixel-space prior on clean images (the data set's ground
@@ -67,6 +68,9 @@ regression  the ablation: the same networks (prior + Control Module, initialised
 defaults sets the sampling a model file gives dndenoise when no --steps/--skip
          are passed (after tuning them on a validation split); rewrites --model
          in place unless --out is given. The weights are not touched.
+rebase   moves the Control Module of a model over the OIDN base onto another
+         import of that base (with more networks, e.g. the prefilter mode's):
+         the network it steers must hold exactly the same weights.
 prior    writes the frozen prior inside a controlled model as a model of its own
          (the "no Control Module" ablation), with the same sampling defaults.
 import-oidn  converts the pretrained networks inside OIDN's core library (found in
@@ -301,6 +305,12 @@ Options parseArgs(int argc, char** argv) {
     cli::checkFiles({o.model}, {{o.out, o.model}});
     return o;
   }
+  if (o.mode == "rebase") {
+    if (o.model.empty() || o.base.empty() || o.out.empty())
+      throw cli::UsageError("rebase needs --model, --base and --out");
+    cli::checkFiles({o.model, o.base}, {{o.out, o.model}});
+    return o;
+  }
   if (o.mode == "import-oidn") {
     if (o.out.empty()) throw cli::UsageError("import-oidn needs --out FILE");
     try {
@@ -312,8 +322,8 @@ Options parseArgs(int argc, char** argv) {
   }
   if (o.mode != "base" && o.mode != "control" && o.mode != "regression")
     throw cli::UsageError(
-        "first argument must be base, control, regression, defaults, prior or import-oidn (see "
-        "--help)");
+        "first argument must be base, control, regression, defaults, prior, rebase or import-oidn "
+        "(see --help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
   if (o.mode != "base" && (o.base.empty() == o.init.empty() || o.data.empty()))
     throw cli::UsageError(o.mode + " needs --data and one of --base or --init");
@@ -639,6 +649,47 @@ int extractPrior(const Options& o) {
   return cli::kExitOk;
 }
 
+// dntrain rebase: a Control Module over the OIDN base, moved onto another
+// import of the same base that holds more networks.
+int rebaseControl(const Options& o) {
+  const LoadedModel from = loadModelFile(o.model);
+  if (!from.oidnControlled)
+    throw IoError(o.model + ": has no Control Module over the OIDN base to move");
+  const LoadedModel onto = loadModelFile(o.base);
+  if (!onto.oidn || onto.info.has_control)
+    throw IoError(o.base + ": is not an OIDN base (dntrain import-oidn makes one)");
+  const std::string& steered = from.info.oidn.control.input_set;
+  const auto& sets = onto.info.oidn.input_sets;
+  if (onto.info.oidn.arch != from.info.oidn.arch ||
+      std::find(sets.begin(), sets.end(), steered) == sets.end())
+    throw IoError(o.base + ": has no " + oidnArchName(from.info.oidn.arch) + " '" + steered +
+                  "' network for the Control Module of " + o.model);
+  const auto ours = from.oidnControlled->steered()->named_parameters();
+  for (const auto& p : onto.oidn->net(steered)->named_parameters())
+    if (!torch::equal(p.value(), ours[p.key()]))
+      throw IoError(o.base + ": its '" + steered +
+                    "' network is not the one the Control Module of " + o.model +
+                    " was trained over (" + p.key() + " differs)");
+
+  ModelInfo info = from.info;
+  info.oidn.input_sets = sets;
+  for (const auto& set : sets)
+    for (const char* key : {".weights", ".blob_offset", ".blob_sha256"})
+      if (onto.info.notes.count(set + key)) info.notes[set + key] = onto.info.notes.at(set + key);
+  info.notes["rebased_onto"] = fs::path(o.base).filename().string();
+  stampProvenance(info, o);
+  OidnControlled model(onto.oidn, info.oidn.control);
+  {
+    torch::NoGradGuard noGrad;
+    const auto trained = from.oidnControlled->control()->named_parameters();
+    for (auto& p : model->control()->named_parameters()) p.value().copy_(trained[p.key()]);
+  }
+  saveModelFile(o.out, info, *model);
+  fmt::print(stderr, "dntrain: {}: the Control Module of {} over {} ({} networks)\n", o.out,
+             o.model, o.base, sets.size());
+  return cli::kExitOk;
+}
+
 // dntrain import-oidn: OIDN's pretrained networks as a model file.
 int importOidnModel(const Options& o) {
   const std::string lib = o.lib.empty() ? findOidnLibrary() : o.lib;
@@ -657,6 +708,7 @@ int importOidnModel(const Options& o) {
 int run(const Options& o) {
   if (o.mode == "defaults") return setDefaults(o);
   if (o.mode == "import-oidn") return importOidnModel(o);
+  if (o.mode == "rebase") return rebaseControl(o);
   if (o.mode == "prior") return extractPrior(o);
   // Debian's LibTorch starts with one thread: use every core unless told otherwise.
   torch::set_num_threads(o.threads > 0 ? o.threads

@@ -4,10 +4,14 @@ per megapixel at 1920x1080 (and any other --sizes), median of --repeats runs
 each, interleaved, with the ratio; peak resident memory of dndenoise.
 
   oidn_base_bench.py --bin build/bin --model models/oidn.dnm [--sizes 1920x1080]
-                     [--repeats 5] [--threads 2]
+                     [--repeats 5] [--threads 2] [--prefilter]
 
 OIDN runs as `oidnBenchmark -r RT.hdr_alb_nrm.WxH` from the pyoidn wheel (its
-own synthetic buffers, colour + albedo + normal, in memory: no file I/O).
+own synthetic buffers, colour + albedo + normal, in memory: no file I/O), and
+dndenoise with `--prefilter off`. With --prefilter both run OIDN's prefilter
+mode: dndenoise its default, OIDN the sum of `RT.hdr_calb_cnrm` (the large
+network, at the default quality) and twice `RT.hdr` (the albedo and normal
+networks have its size and input; the benchmark has no entry for them).
 dndenoise runs on the shipped example resized to the same size with oiiotool
 (every layer kept) and `-n REPEATS`, whose timing line excludes reading,
 writing and loading the model: the same work, the network and its pre- and
@@ -32,10 +36,17 @@ def oidn_dir():
     return os.path.join(out.stdout.strip(), "oidn")
 
 
-def oidn_seconds(size, repeats, threads):
+def oidn_seconds(size, repeats, threads, prefilter):
+    if prefilter:
+        return (oidn_seconds_of("hdr_calb_cnrm", size, repeats, threads)
+                + 2 * oidn_seconds_of("hdr", size, repeats, threads))
+    return oidn_seconds_of("hdr_alb_nrm", size, repeats, threads)
+
+
+def oidn_seconds_of(network, size, repeats, threads):
     base = oidn_dir()
     env = dict(os.environ, LD_LIBRARY_PATH=os.path.join(base, "lib"))
-    cmd = [os.path.join(base, "bin", "oidnBenchmark"), "-r", f"RT.hdr_alb_nrm.{size}", "--threads", str(threads),
+    cmd = [os.path.join(base, "bin", "oidnBenchmark"), "-r", f"RT.{network}.{size}", "--threads", str(threads),
            "-n", str(repeats)]
     out = subprocess.run(cmd, capture_output=True, text=True, env=env)
     m = re.search(r"([\d.]+) msec/image", out.stdout + out.stderr)
@@ -44,9 +55,10 @@ def oidn_seconds(size, repeats, threads):
     return float(m.group(1)) / 1000.0
 
 
-def dndenoise_run(binary, model, frame, out, repeats, threads):
+def dndenoise_run(binary, model, frame, out, repeats, threads, prefilter):
     cmd = ["/usr/bin/time", "-v", os.path.join(binary, "dndenoise"), "--model", model, "--rgb-only",
-           "--threads", str(threads), "-n", str(repeats), frame, "-o", out]
+           "--prefilter", "on" if prefilter else "off", "--threads", str(threads), "-n", str(repeats),
+           frame, "-o", out]
     res = subprocess.run(cmd, capture_output=True, text=True)
     m = re.search(r"([\d.]+) s \(median of \d+\)", res.stderr)
     rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", res.stderr)
@@ -63,8 +75,9 @@ def main():
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds of OIDN and dndenoise")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--prefilter", action="store_true", help="both in OIDN's prefilter mode")
     args = ap.parse_args()
-    print(f"model {args.model}; {args.threads} threads; median of {args.repeats} runs per round, "
+    print(f"model {args.model}; {'prefilter mode; ' if args.prefilter else ''}{args.threads} threads; median of {args.repeats} runs per round, "
           f"{args.rounds} rounds alternating")
     print(f"{'frame':>10} {'OIDN s/MPix':>11} {'ours s/MPix':>11} {'ours/OIDN':>9} {'ours peak RSS GB':>16}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,9 +88,9 @@ def main():
             subprocess.run(["oiiotool", EXAMPLE, "--resize", size, "-o", frame], check=True)
             oidn, ours, rss = [], [], 0.0
             for _ in range(args.rounds):
-                oidn.append(oidn_seconds(size, args.repeats, args.threads) / mpix)
+                oidn.append(oidn_seconds(size, args.repeats, args.threads, args.prefilter) / mpix)
                 seconds, peak = dndenoise_run(args.bin, args.model, frame, os.path.join(tmp, "out.exr"),
-                                              args.repeats, args.threads)
+                                              args.repeats, args.threads, args.prefilter)
                 ours.append(seconds / mpix)
                 rss = max(rss, peak)
             ratios = sorted(o / b for o, b in zip(ours, oidn))

@@ -199,6 +199,23 @@ def main():
     expect_error("dntrain prior of a prior", [dntrain, "prior", "--model", p("prior.dnm"), "--out",
                                               p("x3.dnm")], "prior.dnm", p("x3.dnm"))
 
+    # rebase: the shipped Control Module moved onto a copy of its base gives the same steered result.
+    models = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "models")
+    shipped, base = os.path.join(models, "oidn-control-diffusion.dnm"), os.path.join(models, "oidn.dnm")
+    splatted = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testdata", "renderers",
+                            "mitsuba_gauss_cornell_4spp.exr")
+    out = run([dntrain, "rebase", "--model", shipped, "--base", base, "--out", p("rebased.dnm")])
+    check("dntrain rebase: exit 0", out.returncode == 0, out.stderr)
+    for name, m in (("shipped", shipped), ("rebased", p("rebased.dnm"))):
+        out = run([dndenoise, "--model", m, "--control", "on", "--threads", "1", "--rgb-only", splatted,
+                   "-o", p(f"steered_{name}.exr")])
+    check("the rebased module steers the base exactly as before",
+          out.returncode == 0 and np.array_equal(read_rgb(p("steered_shipped.exr")),
+                                                 read_rgb(p("steered_rebased.exr"))), out.stderr)
+    expect_error("dntrain rebase onto a model that is not an OIDN base",
+                 [dntrain, "rebase", "--model", shipped, "--base", p("prior.dnm"), "--out", p("x4.dnm")],
+                 p("prior.dnm"), p("x4.dnm"))
+
     out = run(base_cmd + ["--rgb-only", frame, "-o", p("rgb.exr")])
     check("--rgb-only writes R,G,B only", out.returncode == 0 and set(channels_of(p("rgb.exr"))) == {"R", "G", "B"})
 
