@@ -12,6 +12,8 @@ the columns with each other, not with dnmetrics' tables) of
   aux_D+col_L default-size albedo and normal networks, then the large colour one
               (what dndenoise runs)
   aux_D+col_D all three at the default size (OIDN's balanced quality)
+  alb_D+col_L only the albedo denoised (default size), the normal as rendered,
+              then the large colour network
   col_L       the large clean-aux colour network on the buffers as rendered
 Inputs and references as eval_sets.py finds them (its test-split inputs must exist).
 """
@@ -86,11 +88,13 @@ def main():
             "aux_D+col_L": run({"color": color, **aux[OIDN_QUALITY_BALANCED]}, OIDN_QUALITY_DEFAULT, clean_aux=True),
             "aux_D+col_D": run({"color": color, **aux[OIDN_QUALITY_BALANCED]}, OIDN_QUALITY_BALANCED,
                                clean_aux=True),
+            "alb_D+col_L": run({"color": color, "albedo": aux[OIDN_QUALITY_BALANCED]["albedo"], "normal": normal},
+                               OIDN_QUALITY_DEFAULT, clean_aux=True),
             "col_L": run({"color": color, "albedo": albedo, "normal": normal}, OIDN_QUALITY_DEFAULT, clean_aux=True),
         }
         for name, image in results.items():
             sums[(group, spp, name)].append(psnr(image, ref))
-    names = ["plain", "aux_L+col_L", "aux_D+col_L", "aux_D+col_D", "col_L"]
+    names = ["plain", "aux_L+col_L", "aux_D+col_L", "aux_D+col_D", "alb_D+col_L", "col_L"]
     print("| set | spp | frames | " + " | ".join(names) + " |")
     print("|---|---|---|" + "---|" * len(names))
     for group, spp in sorted({(g, s) for g, s, _ in sums}):
