@@ -7,9 +7,9 @@
 #include <cstdlib>
 #include <string>
 
+#include "dn/infer/model_inputs.h"
 #include "dn/nn/kernel_net.h"
 #include "dn/train/kernel_trainer.h"
-#include "dn/infer/model_inputs.h"
 
 using namespace dn;
 using Clock = std::chrono::steady_clock;

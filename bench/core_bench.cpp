@@ -19,8 +19,8 @@
 #include <vector>
 
 #include "dn/nn/control_module.h"
-#include "dn/train/trainer.h"
 #include "dn/nn/unet.h"
+#include "dn/train/trainer.h"
 
 using namespace dn;
 

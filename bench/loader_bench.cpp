@@ -6,8 +6,8 @@
 #include <cstring>
 #include <string>
 
-#include "dn/io/buffers.h"
 #include "dn/data/dataset.h"
+#include "dn/io/buffers.h"
 
 using namespace dn::data;
 

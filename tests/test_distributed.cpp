@@ -14,8 +14,8 @@
 #include <string>
 #include <thread>
 
-#include "dn/train/distributed.h"
 #include "dn/nn/model_file.h"
+#include "dn/train/distributed.h"
 #include "dn/train/trainer.h"
 
 extern char** environ;
@@ -177,8 +177,10 @@ TEST_CASE("two-process worker" * doctest::skip()) {
     Trainer trainer(model, tinyRegressionInfo(), TrainerOptions{});
     trainer.setGradientAverager(averager);
     const TrainBatch all = fixedTrainBatch();
-    const TrainBatch mine{
-        all.noisy.narrow(0, rank * share, share), {}, all.target.narrow(0, rank * share, share), {}};
+    const TrainBatch mine{all.noisy.narrow(0, rank * share, share),
+                          {},
+                          all.target.narrow(0, rank * share, share),
+                          {}};
     std::vector<torch::Tensor> saved;
     for (int i = 0; i < kTrainerSteps; ++i)
       saved.push_back(torch::tensor({trainer.step(mine).loss}, torch::kDouble));

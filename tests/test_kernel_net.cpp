@@ -10,9 +10,9 @@
 #include <unistd.h>
 
 #include "dn/nn/kernel_net.h"
+#include "dn/nn/model_file.h"
 #include "dn/train/kernel_trainer.h"
 #include "dn/train/losses.h"
-#include "dn/nn/model_file.h"
 
 using namespace dn;
 namespace fs = std::filesystem;

@@ -11,8 +11,8 @@
 
 #include <unistd.h>
 
-#include "dn/nn/model_file.h"
 #include "dn/diffusion/sampler.h"
+#include "dn/nn/model_file.h"
 #include "dn/train/trainer.h"
 
 using namespace dn;

@@ -158,9 +158,10 @@ double ssim(const Image& reference, const Image& test) {
 double smape(const Image& reference, const Image& test) {
   requireComparable(reference, test);
   const double n = 3.0 * reference.pixelCount();  // norms as means: eps means the same at any size
-  double diff = sumRgb(reference, test,
-                       [](float r, float t) { return std::abs(clampHdr(r) - clampHdr(t)); });
-  double norms = sumRgb(reference, test, [](float r, float t) { return clampHdr(r) + clampHdr(t); });
+  double diff =
+      sumRgb(reference, test, [](float r, float t) { return std::abs(clampHdr(r) - clampHdr(t)); });
+  double norms =
+      sumRgb(reference, test, [](float r, float t) { return clampHdr(r) + clampHdr(t); });
   return (diff / n) / (norms / n + kSmapeEpsilon);
 }
 

@@ -196,8 +196,9 @@ const std::vector<OidnInputSet>& oidnInputSets() {
 const OidnInputSet& oidnInputSet(const std::string& name) {
   for (const auto& set : oidnInputSets())
     if (set.name == name) return set;
-  throw std::invalid_argument("unknown OIDN input set '" + name +
-                              "' (expected hdr, hdr_alb, hdr_alb_nrm, hdr_calb_cnrm_large, alb or nrm)");
+  throw std::invalid_argument(
+      "unknown OIDN input set '" + name +
+      "' (expected hdr, hdr_alb, hdr_alb_nrm, hdr_calb_cnrm_large, alb or nrm)");
 }
 
 OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets)

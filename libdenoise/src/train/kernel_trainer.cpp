@@ -4,9 +4,9 @@
 #include <cmath>
 #include <sstream>
 
-#include "dn/train/losses.h"
 #include "dn/nn/model_file.h"
 #include "dn/tonemap.h"
+#include "dn/train/losses.h"
 
 namespace dn {
 namespace {

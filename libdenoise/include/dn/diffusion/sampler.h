@@ -8,8 +8,8 @@
 
 #include <torch/torch.h>
 
-#include "dn/nn/prior.h"
 #include "dn/diffusion/schedule.h"
+#include "dn/nn/prior.h"
 
 namespace dn {
 

@@ -22,8 +22,8 @@
 
 #include <torch/torch.h>
 
-#include "dn/io/buffers.h"
 #include "dn/image.h"
+#include "dn/io/buffers.h"
 #include "dn/tonemap.h"
 
 namespace dn {

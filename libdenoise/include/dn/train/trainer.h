@@ -11,10 +11,10 @@
 
 #include <torch/torch.h>
 
-#include "dn/train/distributed.h"
+#include "dn/diffusion/schedule.h"
 #include "dn/nn/model_file.h"
 #include "dn/nn/prior.h"
-#include "dn/diffusion/schedule.h"
+#include "dn/train/distributed.h"
 
 namespace dn {
 
