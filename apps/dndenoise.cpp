@@ -69,6 +69,10 @@ model and sampling:
                       own networks first, then the colour with its network for
                       clean aux (on, default, where the model holds them: OIDN's
                       prefilter mode, Blender's "Accurate"); off: noisy aux as is
+  --light-paths on|off  prefiltered, with Cycles' diffuse light passes: also
+                      denoise the diffuse part (guided by its colour) and the
+                      rest apart, and average their sum with the whole (on,
+                      default; about twice the time); off: the whole only
   --seed N            random seed >= 0 (default 0): same seed, same output
   --samples K         mean of K samples (1-256), plus their standard deviation as an
                       'uncertainty' layer
@@ -230,6 +234,11 @@ Options parseArgs(int argc, char** argv) {
       const std::string v = args.value("--prefilter");
       if (v != "on" && v != "off") throw cli::UsageError("--prefilter must be on or off, got " + v);
       o.denoise.prefilter = v == "on";
+    } else if (args.flag("--light-paths")) {
+      const std::string v = args.value("--light-paths");
+      if (v != "on" && v != "off")
+        throw cli::UsageError("--light-paths must be on or off, got " + v);
+      o.denoise.lightPaths = v == "on";
     } else if (args.flag("--seed")) {
       o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     } else if (args.flag("--samples")) {
@@ -581,9 +590,11 @@ int run(Options o, int argc, char** argv) {
                  "dndenoise: {}: {}, exposure x{:.3g}, {} network steps, {} tile(s) of {} px, "
                  "{:.2f} s (median of {}), {:.2f} s/MPix\n",
                  name,
-                 result.steered       ? (denoiser.info().oidn.control.diffusion
-                                             ? "pretrained base + Control Module, diffusion refinement"
-                                             : "pretrained base + Control Module, one pass")
+                 result.steered ? (denoiser.info().oidn.control.diffusion
+                                       ? "pretrained base + Control Module, diffusion refinement"
+                                       : "pretrained base + Control Module, one pass")
+                 : result.lightPathsSplit
+                     ? "pretrained base, albedo and normal prefiltered, diffuse part apart"
                  : result.prefiltered ? "pretrained base, albedo and normal prefiltered"
                                       : "pretrained base",
                  result.exposure, result.steps, result.tileCount, result.tileSize,

@@ -4,7 +4,7 @@ per megapixel at 1920x1080 (and any other --sizes), median of --repeats runs
 each, interleaved, with the ratio; peak resident memory of dndenoise.
 
   oidn_base_bench.py --bin build/bin --model models/oidn.dnm [--sizes 1920x1080]
-                     [--repeats 5] [--threads 2] [--prefilter]
+                     [--repeats 5] [--threads 2] [--prefilter [--light-paths]]
 
 OIDN runs as `oidnBenchmark -r RT.hdr_alb_nrm.WxH` from the pyoidn wheel (its
 own synthetic buffers, colour + albedo + normal, in memory: no file I/O), and
@@ -13,7 +13,10 @@ mode: dndenoise its default, OIDN through pyoidn (the benchmark has no entry
 for the albedo and normal filters) on random buffers of the frame's size in
 memory, timing the execution of its albedo and normal filters (balanced
 quality: the default-size networks, as dndenoise) and its colour filter with
-cleanAux (default quality: the large network).
+cleanAux (default quality: the large network). --light-paths lets dndenoise
+also split off the diffuse part (its default on renders with Cycles' light
+passes, which the example has: three more networks); OIDN stays in its
+prefilter mode, which has no such split.
 dndenoise runs on the shipped example resized to the same size with oiiotool
 (every layer kept) and `-n REPEATS`, whose timing line excludes reading,
 writing and loading the model: the same work, the network and its pre- and
@@ -91,9 +94,10 @@ def benchmark_seconds(size, repeats, threads):
     return float(m.group(1)) / 1000.0
 
 
-def dndenoise_run(binary, model, frame, out, repeats, threads, prefilter):
+def dndenoise_run(binary, model, frame, out, repeats, threads, prefilter, light_paths):
     cmd = ["/usr/bin/time", "-v", os.path.join(binary, "dndenoise"), "--model", model, "--rgb-only",
-           "--prefilter", "on" if prefilter else "off", "--threads", str(threads), "-n", str(repeats),
+           "--prefilter", "on" if prefilter else "off", "--light-paths", "on" if light_paths else "off",
+           "--threads", str(threads), "-n", str(repeats),
            frame, "-o", out]
     res = subprocess.run(cmd, capture_output=True, text=True)
     m = re.search(r"([\d.]+) s \(median of \d+\)", res.stderr)
@@ -112,8 +116,14 @@ def main():
     ap.add_argument("--rounds", type=int, default=3, help="alternating rounds of OIDN and dndenoise")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--prefilter", action="store_true", help="both in OIDN's prefilter mode")
+    ap.add_argument("--light-paths", action="store_true",
+                    help="with --prefilter: dndenoise also splits off the diffuse part")
     args = ap.parse_args()
-    print(f"model {args.model}; {'prefilter mode; ' if args.prefilter else ''}{args.threads} threads; median of {args.repeats} runs per round, "
+    if args.light_paths and not args.prefilter:
+        ap.error("--light-paths needs --prefilter")
+    mode = ("prefilter mode, dndenoise with the light-path split; " if args.light_paths
+            else "prefilter mode; " if args.prefilter else "")
+    print(f"model {args.model}; {mode}{args.threads} threads; median of {args.repeats} runs per round, "
           f"{args.rounds} rounds alternating")
     print(f"{'frame':>10} {'OIDN s/MPix':>11} {'ours s/MPix':>11} {'ours/OIDN':>9} {'ours peak RSS GB':>16}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -126,7 +136,7 @@ def main():
             for _ in range(args.rounds):
                 oidn.append(oidn_seconds(size, args.repeats, args.threads, args.prefilter) / mpix)
                 seconds, peak = dndenoise_run(args.bin, args.model, frame, os.path.join(tmp, "out.exr"),
-                                              args.repeats, args.threads, args.prefilter)
+                                              args.repeats, args.threads, args.prefilter, args.light_paths)
                 ours.append(seconds / mpix)
                 rss = max(rss, peak)
             ratios = sorted(o / b for o, b in zip(ours, oidn))

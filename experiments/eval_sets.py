@@ -9,6 +9,7 @@ spp, as dnmetrics computes them; per-file metrics in WORK/<name>/metrics.json.
   eval_sets.py --name oidn_alb --oidn -- --aux albedo  OIDN with colour + albedo (oidn_denoise.py flags)
   eval_sets.py --name noisy                            the input
   eval_sets.py --name ctl -- --model /work/train/diff.dnm --sigmas 0.05,0.02   dndenoise with these flags
+  eval_sets.py --name ctl --reuse -- ...               the same, keeping results already made (new renders only)
   eval_sets.py --table noisy oidn ctl                  a Markdown table of stored results
   eval_sets.py --table noisy,oidn,ctl oidn_alb,ctl_alb one table per comma list
 
@@ -100,7 +101,9 @@ def evaluate(args, extra):
         result = source
         if args.name != "noisy":
             result = os.path.join(out_dir, f"{group}_{scene}_spp{spp}.exr")
-            if args.oidn:
+            if args.reuse and os.path.exists(result):
+                pass
+            elif args.oidn:
                 run([sys.executable, os.path.join(HERE, "oidn_denoise.py"), "--threads", str(args.threads),
                      *extra, source, "-o", result])
             else:
@@ -239,6 +242,8 @@ def main():
     p.add_argument("--figure", action="append", default=[], metavar="SET/SCENE:SPP",
                    help="with --results: noisy | oidn | the first table's last method | reference "
                         "on this evaldata render")
+    p.add_argument("--reuse", action="store_true",
+                   help="keep results already in WORK/NAME (an earlier run on fewer sets, same flags)")
     p.add_argument("--test-split", default="/work/data/scenes/test")
     p.add_argument("--user", nargs="*", default=["/work/agree/user"])
     p.add_argument("--evaldata", default="/work/evaldata")

@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 #include <ATen/CPUGeneratorImpl.h>
 
 #include "dn/diffusion/refine.h"
 #include "dn/infer/control_inputs.h"
 #include "dn/infer/highlights.h"
+#include "dn/infer/light_paths.h"
 #include "dn/infer/mean_match.h"
 #include "dn/infer/model_inputs.h"
 #include "dn/infer/noise_estimate.h"
@@ -23,35 +25,72 @@ double noteOr(const ModelInfo& info, const std::string& key, double fallback) {
   return it == info.notes.end() ? fallback : std::stod(it->second);
 }
 
+// The image mirrored about its diagonal: x and y swapped.
+Image transposed(const Image& image) {
+  Image out(image.height, image.width, image.channels);
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      std::copy_n(image.pixel(x, y), image.channels, out.pixel(y, x));
+  return out;
+}
+
 // OIDN's prefilter mode: the albedo and the normal are denoised by their own
 // networks, then the colour by the large network trained with noise-free albedo
-// and normal. Each network is a third of the progress.
+// and normal. With the light-path split (dn/infer/light_paths.h) the diffuse
+// colour is cleaned the same way and the large network also denoises the
+// diffuse part, guided by it, and the rest; the mean of the whole and the sum
+// of the parts is the result. The parts are denoised transposed: the network's
+// errors there are less alike its errors on the whole, so the mean gains more
+// (docs/dndenoise.md#light-paths). Each network run is an equal share of the progress.
 OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame,
-                                 const OidnRunOptions& options) {
-  // The colour and the two cleaned buffers are held beside the networks'
-  // activations: they come out of the memory budget (a 4K frame peaked at
-  // 4.2 GB without this).
-  const double held = 3.0 * 3 * sizeof(float) * double(frame.width) * frame.height;
-  auto phase = [&](int k) {
+                                 const OidnRunOptions& options, bool splitLightPaths) {
+  const int runs = splitLightPaths ? 6 : 3;
+  // The images held beside the networks' activations come out of the memory
+  // budget (a 4K frame peaked at 4.2 GB without this): the colour and the
+  // cleaned buffers, and with the split its parts, their transposed guides
+  // and the results.
+  const double held =
+      (splitLightPaths ? 10.0 : 3.0) * 3 * sizeof(float) * double(frame.width) * frame.height;
+  int run = 0;
+  auto next = [&]() {
     OidnRunOptions o = options;
     o.maxMemoryBytes = std::max(options.maxMemoryBytes - held, options.maxMemoryBytes / 4);
-    if (options.progress) o.progress = [&, k](double f) { options.progress((k + f) / 3.0); };
+    const int k = run++;
+    if (options.progress) o.progress = [&, k](double f) { options.progress((k + f) / runs); };
     return o;
+  };
+  auto cleaned = [&](const char* setName, const FrameBuffers& source) {
+    const OidnInputSet& set = oidnInputSet(setName);
+    OidnUNet net = base->net(setName);
+    net->to(options.device);
+    return tensorToImage(runOidn(net, set, source, next()).image);
   };
   FrameBuffers clean;
   clean.width = frame.width;
   clean.height = frame.height;
   clean.buffers["color"] = frame.get("color");
-  int k = 0;
-  for (const char* name : {"alb", "nrm"}) {
-    const OidnInputSet& set = oidnInputSet(name);
-    OidnUNet net = base->net(name);
-    net->to(options.device);
-    clean.buffers[set.denoised()] = tensorToImage(runOidn(net, set, frame, phase(k++)).image);
-  }
-  OidnUNet net = base->net("hdr_calb_cnrm_large");
+  clean.buffers["albedo"] = cleaned("alb", frame);
+  clean.buffers["normal"] = cleaned("nrm", frame);
+  const OidnInputSet& set = oidnInputSet("hdr_calb_cnrm_large");
+  OidnUNet net = base->net(set.name);
   net->to(options.device);
-  return runOidn(net, oidnInputSet("hdr_calb_cnrm_large"), clean, phase(k));
+  OidnRunResult whole = runOidn(net, set, clean, next());
+  if (!splitLightPaths) return whole;
+
+  FrameBuffers part;
+  part.width = frame.height;
+  part.height = frame.width;
+  part.buffers["albedo"] = transposed(frame.get("diffuse_color"));
+  part.buffers["albedo"] = cleaned("alb", part);
+  part.buffers["normal"] = transposed(clean.get("normal"));
+  LightPathSplit split = splitDiffuse(frame);  // each part freed once transposed
+  part.buffers["color"] = transposed(std::exchange(split.diffuse, Image()));
+  const torch::Tensor diffuse = runOidn(net, set, part, next()).image;
+  part.buffers["albedo"] = transposed(clean.get("albedo"));
+  part.buffers["color"] = transposed(std::exchange(split.rest, Image()));
+  const torch::Tensor rest = runOidn(net, set, part, next()).image;
+  whole.image = 0.5 * (whole.image + (diffuse + rest).transpose(2, 3));
+  return whole;
 }
 
 // Forward noise at a step in image units, sqrt((1 - alpha_bar) / alpha_bar).
@@ -386,19 +425,23 @@ DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
     run.progress = options.progress;
     auto [net, set] = base->pick(frame.names());
     result.prefiltered = options.prefilter && base->canPrefilter() && set->buffers.size() == 3;
+    result.lightPathsSplit = result.prefiltered && options.lightPaths && hasDiffusePasses(frame);
     OidnRunResult out;
     if (result.prefiltered) {
-      out = runOidnPrefiltered(base, frame, run);
+      out = runOidnPrefiltered(base, frame, run, result.lightPathsSplit);
     } else {
       net->to(options.device);
       out = runOidn(net, *set, frame, run);
     }
     result.color = tensorToImage(out.image);
     result.exposure = out.exposure;
-    result.steps = result.prefiltered ? 3 : 1;
+    result.steps = result.lightPathsSplit ? 6 : result.prefiltered ? 3 : 1;
     result.tileSize = out.tileSize;
     result.tileCount = out.tileCount;
     result.buffersUsed = set->buffers;
+    if (result.lightPathsSplit)
+      result.buffersUsed.insert(result.buffersUsed.end(), diffusePassBuffers().begin(),
+                                diffusePassBuffers().end());
     if (control && options.control == ControlUse::Auto) {
       // Compared where the base works: exposed and PU-encoded.
       const torch::Tensor input = imageToTensor(frame.get("color")) * out.exposure;

@@ -62,6 +62,9 @@ struct DenoiseOptions {
   // networks, then the colour with its network for clean aux (where the model
   // holds those networks; OIDN's prefilter mode, Blender's "Accurate").
   bool prefilter = true;
+  // Prefiltered, with the diffuse light passes: the diffuse part and the rest
+  // denoised apart and averaged with the whole (dn/infer/light_paths.h).
+  bool lightPaths = true;
   std::function<void(double fraction)> progress;  // 0..1, after every network step
 };
 
@@ -101,6 +104,7 @@ struct DenoiseResult {
   std::vector<std::string> buffersUsed;  // the input buffers the network saw
   bool steered = false;                  // a Control Module steered the base
   bool prefiltered = false;              // albedo and normal were denoised first
+  bool lightPathsSplit = false;          // the diffuse part was denoised apart too
   std::optional<NoiseLeft> noiseLeft;    // by the base, when a Control Module could steer it
 };
 
