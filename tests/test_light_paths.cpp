@@ -98,3 +98,21 @@ TEST_CASE("without the diffuse passes the result is the prefiltered base's, bit 
   CHECK(a.prefiltered);
   CHECK(a.color.pixels == b.color.pixels);
 }
+
+TEST_CASE("the base and the default read the diffuse passes where they can split") {
+  const std::vector<std::string> cycles = {"color",         "albedo",         "normal",
+                                           "depth",         "diffuse_direct", "diffuse_indirect",
+                                           "diffuse_color", "glossy_direct"};
+  for (const char* model : {"oidn.dnm", "default.dnm"}) {
+    CAPTURE(model);
+    const Denoiser denoiser = Denoiser::fromFile(std::string(DN_SOURCE_DIR) + "/models/" + model);
+    for (const auto& name : diffusePassBuffers()) {
+      const auto usable = denoiser.usableBuffers(cycles);
+      CHECK(std::count(usable.begin(), usable.end(), name) == 1);
+    }
+    // Without the normal there is no prefilter mode, so no split.
+    const auto noNormal = denoiser.usableBuffers(
+        {"color", "albedo", "diffuse_direct", "diffuse_indirect", "diffuse_color"});
+    CHECK(noNormal == std::vector<std::string>{"color", "albedo"});
+  }
+}

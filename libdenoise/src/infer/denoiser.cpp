@@ -193,19 +193,28 @@ bool Denoiser::controlApplies(const std::vector<std::string>& available) const {
 }
 
 std::vector<std::string> Denoiser::usableBuffers(const std::vector<std::string>& available) const {
+  auto present = [&](const std::string& name) {
+    return std::find(available.begin(), available.end(), name) != available.end();
+  };
+  std::vector<std::string> usable;
   if (controlApplies(available)) {
-    std::vector<std::string> usable = oidnInputSet(info().oidn.control.input_set).buffers;
+    usable = oidnInputSet(info().oidn.control.input_set).buffers;
     for (const auto& name : info().oidn.control.extra_buffers)
-      if (std::find(available.begin(), available.end(), name) != available.end())
-        usable.push_back(name);
+      if (present(name)) usable.push_back(name);
+  } else if (info().base_kind == BaseKind::Oidn) {
+    const OidnInputSet* set = model_.oidn->pick(available).second;
+    if (set) usable = set->buffers;
+  } else {
+    usable = {"color"};
+    usable.insert(usable.end(), info().input_buffers.begin(), info().input_buffers.end());
     return usable;
   }
-  if (info().base_kind == BaseKind::Oidn) {
-    const OidnInputSet* set = model_.oidn->pick(available).second;
-    return set ? set->buffers : std::vector<std::string>{};
-  }
-  std::vector<std::string> usable = {"color"};
-  usable.insert(usable.end(), info().input_buffers.begin(), info().input_buffers.end());
+  // The light-path split reads the diffuse passes (DenoiseOptions::lightPaths).
+  const OidnBase base = model_.oidnControlled ? model_.oidnControlled->base() : model_.oidn;
+  if (usable.size() >= 3 && base->canPrefilter() &&
+      std::all_of(diffusePassBuffers().begin(), diffusePassBuffers().end(), present))
+    for (const auto& name : diffusePassBuffers())
+      if (std::find(usable.begin(), usable.end(), name) == usable.end()) usable.push_back(name);
   return usable;
 }
 
