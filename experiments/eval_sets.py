@@ -12,6 +12,7 @@ spp, as dnmetrics computes them; per-file metrics in WORK/<name>/metrics.json.
   eval_sets.py --name ctl --reuse -- ...               the same, keeping results already made (new renders only)
   eval_sets.py --table noisy oidn ctl                  a Markdown table of stored results
   eval_sets.py --table noisy,oidn,ctl oidn_alb,ctl_alb one table per comma list
+  eval_sets.py --table 'colour + albedo:oidn_alb,ctl_alb'   ... with a heading
 
 Sets (missing ones are skipped with a note):
   test     --test-split DIR: scene_*/frame_0 with 4-spp stacks (inputs by make_inputs.py, cached)
@@ -199,13 +200,19 @@ def write_section(path, lines):
 
 
 def table(args, specs):
-    """One table of the methods given; NAME,NAME,... arguments make one table each."""
-    tables = [spec.split(",") for spec in specs] if any("," in spec for spec in specs) else [specs]
-    names = list(dict.fromkeys(n for t in tables for n in t))
+    """One table of the methods given; NAME,NAME,... arguments make one table each, and
+    'TITLE:NAME,NAME' gives that table a heading."""
+    split = [spec.rsplit(":", 1) if ":" in spec else ["", spec] for spec in specs]
+    if any("," in spec for _, spec in split):
+        tables = [(title, spec.split(",")) for title, spec in split]
+    else:
+        tables = [("", [spec for _, spec in split])]
+    names = list(dict.fromkeys(n for _, t in tables for n in t))
     results, commands = load_results(args.work, names)
     lines = []
-    for t in tables:
-        lines += ([""] if lines else []) + table_lines({n: results[n] for n in t}, t)
+    for title, t in tables:
+        lines += ([""] if lines else []) + ([f"### {title}", ""] if title else [])
+        lines += table_lines({n: results[n] for n in t}, t)
     if not args.results:
         print("\n".join(lines))
         return
@@ -216,18 +223,20 @@ def table(args, specs):
                "`report.py` keeps this section. Each method was scored with",
                "", "```sh"]
     section += [f"python3 experiments/eval_sets.py --name {n}{commands[n]}" for n in names]
-    section += [f"python3 experiments/eval_sets.py --table {' '.join(specs)} --results docs/RESULTS.md"
+    quoted = [f"'{spec}'" if " " in spec else spec for spec in specs]
+    section += [f"python3 experiments/eval_sets.py --table {' '.join(quoted)} --results docs/RESULTS.md"
                 + "".join(f" --figure {f}" for f in args.figure), "```", "",
                 "Sets: `test`, the Cycles 3.4 test split; `user`, the hand-built Blender scenes "
                 "(experiments/user_scenes.py); `blender5`, `mitsuba_box` (independent noise) and "
                 "`mitsuba_gauss` (Mitsuba's default Gaussian pixel filter, which splats samples and "
                 "correlates the noise) from experiments/render_evaldata.sh. Methods: `noisy`, the input; "
-                "`oidn*`, OIDN 2.5.1 itself (pyoidn; colour + albedo + normal unless `--aux` says less); "
-                "`base`, `dndenoise --model models/oidn.dnm`; `default*`, `dndenoise` with no flags but "
-                "`--buffers`. Means over frames; FLIP and L1 lower is better.", ""]
+                "`oidn*`, OIDN 2.5.1 itself (pyoidn; colour + albedo + normal unless `--aux` says less; "
+                "`oidn_pre`, its prefilter mode); `base`, `dndenoise --model models/oidn.dnm`; `default*`, "
+                "`dndenoise` with no flags but `--buffers` (`default`: every buffer the file has). "
+                "Means over frames; FLIP and L1 lower is better.", ""]
     section += lines
     for spec in args.figure:
-        section += [""] + figure_lines(args, tables[0], spec, os.path.join(ROOT, "docs", "results"),
+        section += [""] + figure_lines(args, tables[-1][1], spec, os.path.join(ROOT, "docs", "results"),
                                        args.results)
     write_section(args.results, section)
     print(f"eval_sets: wrote the section into {args.results}")
@@ -240,7 +249,7 @@ def main():
     p.add_argument("--table", nargs="+", metavar="NAME", help="print a table of stored results")
     p.add_argument("--results", help="with --table: write it into this file's eval_sets section instead")
     p.add_argument("--figure", action="append", default=[], metavar="SET/SCENE:SPP",
-                   help="with --results: noisy | oidn | the first table's last method | reference "
+                   help="with --results: noisy | oidn | the last table's last method | reference "
                         "on this evaldata render")
     p.add_argument("--reuse", action="store_true",
                    help="keep results already in WORK/NAME (an earlier run on fewer sets, same flags)")

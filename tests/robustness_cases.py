@@ -46,6 +46,8 @@ CASES = [
     Case("--eta nan", D + " --eta nan {frame} -o {w}/x.exr", 1, "finite"),
     Case("--control maybe", D + " --control maybe {frame} -o {w}/x.exr", 1, "--control must be auto, on or off",
          absent=("{w}/x.exr",)),
+    Case("--light-paths maybe", D + " --light-paths maybe {frame} -o {w}/x.exr", 1,
+         "--light-paths must be on or off", absent=("{w}/x.exr",)),
     Case("--eta 2", D + " --eta 2 {frame} -o {w}/x.exr", 1, "--eta must be between 0 and 1"),
     Case("--tile 1 fails at once", D + " --tile 1 {frame} -o {w}/x.exr", 1, "--tile must be between 16",
          absent=("{w}/x.exr",)),
