@@ -72,7 +72,7 @@ model and sampling:
   --light-paths on|off  prefiltered, with Cycles' diffuse light passes: also
                       denoise the diffuse part (guided by its colour) and the
                       rest apart, and average their sum with the whole (on,
-                      default; about twice the time); off: the whole only
+                      default; 2.6 times the time); off: the whole only
   --seed N            random seed >= 0 (default 0): same seed, same output
   --samples K         mean of K samples (1-256), plus their standard deviation as an
                       'uncertainty' layer
