@@ -14,6 +14,8 @@ Per set and spp, the mean PSNR (Reinhard v / (1 + v), computed here) and L1 of
   mean      (whole + parts) / 2
   mean_T    the same with the parts denoised on the transposed frame
             (what dndenoise runs by default)
+  mean_T_D  the same with the parts denoised by the default-size network for
+            clean aux (OIDN's balanced quality) instead of the large one
   whole_T   (whole + whole on the transposed frame) / 2: no passes needed
   mean3     (whole + parts + parts with the glossy part split off as well) / 3
 Inputs and references as eval_sets.py finds them.
@@ -32,7 +34,7 @@ import eval_sets  # noqa: E402
 from exrutil import ExrError, find_channels, read_channels, read_color  # noqa: E402
 from oidn_denoise import load_buffers  # noqa: E402
 
-NAMES = ["whole", "parts", "mean", "mean_T", "whole_T", "mean3"]
+NAMES = ["whole", "parts", "mean", "mean_T", "mean_T_D", "whole_T", "mean3"]
 PASSES = {"DiffCol": "Diffuse Color", "DiffDir": "Diffuse Direct", "DiffInd": "Diffuse Indirect",
           "GlossCol": "Glossy Color", "GlossDir": "Glossy Direct", "GlossInd": "Glossy Indirect"}
 
@@ -71,8 +73,8 @@ class Oidn:
     def clean(self, name, image):
         return self.run({name: image}, OIDN_QUALITY_BALANCED, hdr=False, clean_aux=False)
 
-    def colour(self, color, albedo, normal):
-        return self.run({"color": color, "albedo": albedo, "normal": normal})
+    def colour(self, color, albedo, normal, quality=OIDN_QUALITY_DEFAULT):
+        return self.run({"color": color, "albedo": albedo, "normal": normal}, quality)
 
 
 def variants(oidn, path):
@@ -83,21 +85,22 @@ def variants(oidn, path):
     diffuse = diffuse_colour * np.maximum(p["DiffDir"] + p["DiffInd"], 0)
     glossy = glossy_colour * np.maximum(p["GlossDir"] + p["GlossInd"], 0)
 
-    def denoised(t, parts):
+    def denoised(t, parts, quality=OIDN_QUALITY_DEFAULT):
         """In orientation t: each (part, its colour) denoised with that colour as albedo, plus
         what the parts leave of the render with the albedo, summed."""
         albedo_t, normal_t = oidn.clean("albedo", t(albedo)), oidn.clean("normal", t(normal))
         out, rest = 0, color
         for part, guide in parts:
-            out = out + oidn.colour(t(part), oidn.clean("albedo", t(guide)), normal_t)
+            out = out + oidn.colour(t(part), oidn.clean("albedo", t(guide)), normal_t, quality)
             rest = rest - part
-        return t(out + oidn.colour(t(np.maximum(rest, 0)), albedo_t, normal_t))
+        return t(out + oidn.colour(t(np.maximum(rest, 0)), albedo_t, normal_t, quality))
 
     same = lambda x: x  # noqa: E731
     whole = denoised(same, [])
     split = denoised(same, [(diffuse, diffuse_colour)])
     return {"whole": whole, "parts": split, "mean": (whole + split) / 2,
             "mean_T": (whole + denoised(transposed, [(diffuse, diffuse_colour)])) / 2,
+            "mean_T_D": (whole + denoised(transposed, [(diffuse, diffuse_colour)], OIDN_QUALITY_BALANCED)) / 2,
             "whole_T": (whole + denoised(transposed, [])) / 2,
             "mean3": (whole + split + denoised(same, [(diffuse, diffuse_colour), (glossy, glossy_colour)])) / 3}
 
