@@ -210,12 +210,16 @@ std::vector<std::string> Denoiser::usableBuffers(const std::vector<std::string>&
     return usable;
   }
   // The light-path split reads the diffuse passes (DenoiseOptions::lightPaths).
-  const OidnBase base = model_.oidnControlled ? model_.oidnControlled->base() : model_.oidn;
+  const OidnBase base = oidnBase();
   if (usable.size() >= 3 && base->canPrefilter() &&
       std::all_of(diffusePassBuffers().begin(), diffusePassBuffers().end(), present))
     for (const auto& name : diffusePassBuffers())
       if (std::find(usable.begin(), usable.end(), name) == usable.end()) usable.push_back(name);
   return usable;
+}
+
+OidnBase Denoiser::oidnBase() const {
+  return model_.oidnControlled ? model_.oidnControlled->base() : model_.oidn;
 }
 
 double Denoiser::bytesPerPixel() const {
@@ -425,7 +429,7 @@ DenoiseResult Denoiser::denoiseWithBase(const FrameBuffers& frame,
   DenoiseResult result;
   {
     c10::InferenceMode inference;
-    OidnBase base = model_.oidnControlled ? model_.oidnControlled->base() : model_.oidn;
+    OidnBase base = oidnBase();
     OidnRunOptions run;
     run.device = options.device;
     run.exposure = static_cast<float>(options.exposure);

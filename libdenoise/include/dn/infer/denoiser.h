@@ -134,6 +134,8 @@ class Denoiser {
   double measureNoise(const FrameBuffers& frame, double exposure = 0.0) const;
 
  private:
+  // The pretrained base, also under a Control Module (models with BaseKind::Oidn).
+  OidnBase oidnBase() const;
   DenoiseResult denoiseWithBase(const FrameBuffers& frame, const DenoiseOptions& options) const;
   DenoiseResult denoiseWithControl(const FrameBuffers& frame, const DenoiseOptions& options) const;
 
