@@ -475,20 +475,21 @@ Image cleanseWithKernelNet(LoadedKernelModel& model, const fs::path& dir,
 }
 
 // Cleanses with a denoiser model (the pretrained base) given the ground truth's
-// own albedo and normal; `mean` averages the colour of both ground truths first.
+// own buffers; `mean` averages every buffer of both ground truths first, so
+// that the colour and the light passes the base splits it by stay consistent.
 Image cleanseWithDenoiser(const Denoiser& denoiser, const fs::path& dir,
                           const std::string& source) {
   FrameBuffers frame = readFrame((dir / (source == "b" ? "gt_b.exr" : "gt_a.exr")).string());
   if (source == "mean") {
-    ReadOptions colorOnly;
-    colorOnly.only = {"color"};
     const std::string other = (dir / "gt_b.exr").string();
-    const FrameBuffers second = readFrame(other, colorOnly);
-    const Image& b = second.get("color");
-    Image& a = frame.buffers.at("color");
-    if (a.width != b.width || a.height != b.height || a.channels != b.channels)
-      throw IoError(other + ": not the size of gt_a.exr");
-    for (size_t i = 0; i < a.pixels.size(); ++i) a.pixels[i] = 0.5f * (a.pixels[i] + b.pixels[i]);
+    const FrameBuffers second = readFrame(other);
+    for (auto& [name, a] : frame.buffers) {
+      if (!second.has(name)) throw IoError(other + ": has no " + name + " buffer, gt_a.exr has");
+      const Image& b = second.get(name);
+      if (a.width != b.width || a.height != b.height || a.channels != b.channels)
+        throw IoError(other + ": " + name + " is not the size of gt_a.exr's");
+      for (size_t i = 0; i < a.pixels.size(); ++i) a.pixels[i] = 0.5f * (a.pixels[i] + b.pixels[i]);
+    }
   }
   DenoiseOptions options;
   options.control = ControlUse::Never;

@@ -369,8 +369,6 @@ int main(int argc, char** argv) {
   removeTemporaryFilesOnSignal("dnmetrics");
   try {
     return run(parseArgs(argc, argv), argc, argv);
-  } catch (const cli::UsageError& e) {
-    fmt::print(stderr, "dnmetrics: {}\n", e.what());
   } catch (const std::exception& e) {
     fmt::print(stderr, "dnmetrics: {}\n", e.what());
   }

@@ -5,7 +5,7 @@
   python3 bench/scenegen_profile.py --out DATA --summary     # only the table, from what DATA holds
 
 Renders the seeds with scenegen/make_dataset.py --profile (options after the known
-ones go to it; defaults are the training set's: 128x128, 16 x 4 spp, 2 x 256-spp
+ones go to it; defaults are the training set's: 128x128, 8 x 4 spp, 2 x 64-spp
 ground truth, 2 frames), --procs processes (shards) side by side with one Cycles
 thread each, so that the serial parts of one (start-up, scene build, EXR writes)
 do not leave a core idle. Then, from the frames' meta.json and the batch logs
@@ -43,7 +43,7 @@ def seed_list(text):
 
 def run(args, extra):
     """make_dataset.py shards side by side; returns (wall seconds, CPU seconds of the children)."""
-    defaults = {"--res": "128", "--spp": "4", "--stacks": "16", "--gt-spp": "256", "--frames": "2",
+    defaults = {"--res": "128", "--spp": "4", "--stacks": "8", "--gt-spp": "64", "--frames": "2",
                 "--threads": "1", "--batch": "20"}
     for key, value in defaults.items():
         if key not in extra:

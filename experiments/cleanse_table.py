@@ -7,7 +7,8 @@ much higher-spp reference (docs/dncleanse.md, "Which target").
 
 --data are data sets (gt_a.exr and gt_b.exr per frame); --ref holds the same
 scenes and frames rendered once at a higher spp with another --seed-tag
-(make_dataset.py --gt-count 1). Each candidate target is scored with dnmetrics
+(make_dataset.py --gt-count 1), or, with --ref-mean, twice (the reference is the
+mean of its gt_a and gt_b). Each candidate target is scored with dnmetrics
 against the reference: relMSE (linear), PSNR (Reinhard) and FLIP.
 """
 
@@ -54,6 +55,19 @@ def cleanse(dncleanse, model, data, source):
                     "--threads", "2"], check=True, capture_output=True)
 
 
+def reference_of(a, frame, work):
+    """The reference image of one frame: its gt_a, or with --ref-mean the mean of gt_a and gt_b."""
+    d = os.path.join(a.ref, frame)
+    if not a.ref_mean:
+        return os.path.join(d, "gt_a.exr")
+    path = os.path.join(work, "ref", frame, "mean.exr")
+    if not os.path.isfile(path):
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        rgb = 0.5 * (exrutil.read_color(os.path.join(d, "gt_a.exr")) + exrutil.read_color(os.path.join(d, "gt_b.exr")))
+        exrutil.write_rgb(path, rgb)
+    return path
+
+
 def score_targets(a, data, frames):
     """{label: [metrics per frame]} of the raw and the cleansed targets of one data set."""
     gt_spp = spp_of(os.path.join(data, frames[0]))
@@ -77,7 +91,7 @@ def score_targets(a, data, frames):
                 d = os.path.join(work, "set", f)
                 os.replace(os.path.join(d, "gt_clean.exr"), os.path.join(d, f"clean_{source}.exr"))
             candidates[label] = lambda f, s=source: os.path.join(work, "set", f, f"clean_{s}.exr")
-        return {label: [score(dnmetrics, os.path.join(a.ref, f, "gt_a.exr"), path(f)) for f in frames]
+        return {label: [score(dnmetrics, reference_of(a, f, work), path(f)) for f in frames]
                 for label, path in candidates.items()}
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -87,6 +101,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, nargs="+", help="data sets whose targets are compared")
     p.add_argument("--ref", required=True)
+    p.add_argument("--ref-mean", action="store_true", help="the reference is the mean of its gt_a and gt_b")
     p.add_argument("--bin", default="build/bin")
     p.add_argument("--model", default="models/oidn.dnm", help="the cleanser given to dncleanse apply")
     a = p.parse_args()
@@ -94,11 +109,11 @@ def main():
     frames = [f for f in frames_of(a.ref) if all(os.path.isfile(os.path.join(d, f, "meta.json")) for d in a.data)]
     if not frames:
         exrutil.fail(f"{a.ref}: no frame that every --data set has")
-    ref_spp = spp_of(os.path.join(a.ref, frames[0]))
+    ref_spp = spp_of(os.path.join(a.ref, frames[0])) * (2 if a.ref_mean else 1)
     results = {}
     for data in a.data:
         results.update(score_targets(a, data, frames))
-    print(f"{len(frames)} frames, against one {ref_spp}-spp render of each ({a.ref}):\n")
+    print(f"{len(frames)} frames, against a {ref_spp}-spp reference of each ({a.ref}):\n")
     print("| target | relMSE (median) | relMSE (mean) | PSNR (dB) | FLIP |")
     print("|---|---:|---:|---:|---:|")
     for label, rows in results.items():
