@@ -161,6 +161,18 @@ def main():
             errors.append((np.abs(read_rgb(f) - truth).mean(), np.abs(raw - truth).mean()))
         check("apply with the base: closer to the truth than the raw mean of both, on every frame",
               all(cleansed < 0.5 * raw for cleansed, raw in errors), str(errors))
+        # Every buffer is averaged, so gt_b must have each one gt_a has.
+        lone = p("lone")
+        d = os.path.join(lone, "train", "scene_000000", "frame_0")
+        os.makedirs(d)
+        for name in ("gt_a", "gt_b"):
+            shutil.copy(os.path.join(os.path.dirname(frames[0]), name + ".exr"), os.path.join(d, name + ".exr"))
+        write_rgb(os.path.join(d, "gt_b.exr"), read_rgb(os.path.join(d, "gt_b.exr")))
+        with open(os.path.join(d, "meta.json"), "w") as f:
+            f.write("{}\n")
+        expect_error("--source mean: gt_b lacks a buffer of gt_a",
+                     [tool, "apply", "--model", args.oidn_model, "--data", lone, "--source", "mean"],
+                     "gt_b.exr: has no albedo buffer", no_file=os.path.join(d, "gt_clean.exr"))
         expect_error("--source mean with a kernel model",
                      [tool, "apply", "--model", p("full.pt"), "--data", data, "--source", "mean"], "mean")
 
