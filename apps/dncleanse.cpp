@@ -59,7 +59,7 @@ train options:
   --halve-every N        halve the learning rate every N steps (default 0: never)
   --seed S               data order and initial weights, >= 0 (default 1)
   --task cleanse|denoise (default cleanse)
-  --spp LIST             denoise input sample counts (default 4,16,64)
+  --spp LIST             denoise input sample counts (default 4,16,32)
   --buffers LIST         aux buffers (default: the standard Cycles set, see docs)
   --widths LIST          UNet widths per level, each 1-1024 (default 24,32,48)
   --dilations LIST       one kernel iteration per dilation, each 1-64 (default 1,2,4)
@@ -128,7 +128,7 @@ struct TrainOptions {
   int steps = 20000, batch = 8, crop = 64, halve_every = 0, threads = 2;
   int val_every = 0, val_samples = 32;
   double lr = 1e-3, checkpoint_minutes = 5;
-  std::string seed = "1", task = "cleanse", spp = "4,16,64";
+  std::string seed = "1", task = "cleanse", spp = "4,16,32";
   std::string train_split = "train", val_split = "val";
   bool resume = false;
   std::string command;  // recorded in the model file

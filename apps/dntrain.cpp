@@ -95,7 +95,8 @@ options:
                         to extend
   --batch N             batch size, 1-1024 (default 8)
   --crop N              crop size, 16-4096 (default 64)
-  --spp LIST            input sample counts, each >= 1 (default 4,16,64)
+  --spp LIST            input sample counts, each >= 1 (default 4,16,32: the
+                        training set's 8 stacks of 4 spp)
   --lr X                learning rate in (0, 1] (default 2e-4)
   --halve-every N       halve lr every N steps (default 0: never)
   --ema X               EMA decay in [0, 1) (default 0.999)     --seed N  >= 0 (default 1)
@@ -149,7 +150,7 @@ struct Options {
   std::string aux = "default", prediction = "eps", sigmas = "0.05,0.02";
   int64_t hintChannels = 32;
   int64_t cacheGb = 4;
-  std::vector<int> spp = {4, 16, 64};
+  std::vector<int> spp = {4, 16, 32};  // the training set's 8 stacks of 4 spp
   int64_t steps = 2000, batch = 8, crop = 64, halveEvery = 0, valEvery = 250, baseChannels = 0,
           resBlocks = 0, defaultSkip = -1, defaultSpp = -1;
   double exposureTarget = -1.0, renderStart = 0.0;
