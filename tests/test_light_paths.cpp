@@ -106,10 +106,9 @@ TEST_CASE("the base and the default read the diffuse passes where they can split
   for (const char* model : {"oidn.dnm", "default.dnm"}) {
     CAPTURE(model);
     const Denoiser denoiser = Denoiser::fromFile(std::string(DN_SOURCE_DIR) + "/models/" + model);
-    for (const auto& name : diffusePassBuffers()) {
-      const auto usable = denoiser.usableBuffers(cycles);
+    const auto usable = denoiser.usableBuffers(cycles);
+    for (const auto& name : diffusePassBuffers())
       CHECK(std::count(usable.begin(), usable.end(), name) == 1);
-    }
     // Without the normal there is no prefilter mode, so no split.
     const auto noNormal = denoiser.usableBuffers(
         {"color", "albedo", "diffuse_direct", "diffuse_indirect", "diffuse_color"});
