@@ -470,6 +470,24 @@ TEST_CASE("other renderers' AOV names in one multichannel EXR") {
     CHECK(frame.names() == std::vector<std::string>{"color", "albedo", "normal", "color_variance"});
     CHECK(frame.sourceChannels.at("normal").front() == "Ns.X");
   }
+  SUBCASE("V-Ray and Redshift: the diffuse filter is the albedo") {
+    writeParts(dir / "vray.exr",
+               {PartDesc{"", concat({{"R", "G", "B"},
+                                     layerChannels("VRayDiffuseFilter"),
+                                     layerChannels("VRayNormals", {"X", "Y", "Z"}),
+                                     {"VRayZDepth.Z"}})}});
+    const FrameBuffers vray = readFrame(dir / "vray.exr");
+    // VRayZDepth is normalised by the depth clip, not a distance: not taken for depth.
+    CHECK(vray.names() == std::vector<std::string>{"color", "albedo", "normal"});
+    CHECK(vray.get("albedo").at(3, 1, 1) == doctest::Approx(code(0, 3, 1, 4)));
+    writeParts(dir / "redshift.exr",
+               {PartDesc{"", concat({{"R", "G", "B"},
+                                     layerChannels("DiffuseFilter"),
+                                     layerChannels("BumpNormals", {"X", "Y", "Z"}),
+                                     {"Z"}})}});
+    CHECK(readFrame(dir / "redshift.exr").names() ==
+          std::vector<std::string>{"color", "albedo", "normal", "depth"});
+  }
   SUBCASE("RenderMan and Karma") {
     writeParts(dir / "rman.exr", {PartDesc{"", concat({layerChannels("Ci", {"r", "g", "b"}),
                                                        {"a"},

@@ -14,7 +14,9 @@ const std::vector<BufferSpec>& canonicalBuffers() {
   //     specular_albedo, transmission_albedo, emission, background;
   //   RenderMan: Ci, albedo, normal / Nn, z / zfiltered;
   //   Karma/Mantra (Houdini): C, albedo, N, Pz;
-  //   V-Ray: plain RGB, VRayNormals, VRayBumpNormals;
+  //   V-Ray: plain RGB, VRayDiffuseFilter (the albedo its denoisers take),
+  //     VRayNormals, VRayBumpNormals;
+  //   Redshift: plain RGB, DiffuseFilter, N / BumpNormals, Z;
   //   pbrt-v4 (gbuffer film): R,G,B, Albedo, Ns (shading normal), Variance;
   //   Mitsuba 3 (aov integrator, names as its docs use them): R,G,B,
   //     albedo, nn / sh_normal (X,Y,Z), dd.y / depth (T).
@@ -32,12 +34,13 @@ const std::vector<BufferSpec>& canonicalBuffers() {
        "noisy radiance (HDR, linear)"},
       {"albedo",
        3,
-       {"Denoising Albedo", "albedo", "Albedo", "denoise_albedo", "alb"},
+       {"Denoising Albedo", "albedo", "Albedo", "denoise_albedo", "alb", "VRayDiffuseFilter",
+        "DiffuseFilter"},
        "first-hit albedo"},
       {"normal",
        3,
        {"Denoising Normal", "Normal", "normal", "Ns", "N", "Nn", "nn", "sh_normal", "normals",
-        "VRayNormals", "VRayBumpNormals", "nrm"},
+        "VRayNormals", "VRayBumpNormals", "BumpNormals", "nrm"},
        "first-hit normal"},
       {"depth",
        1,
