@@ -24,7 +24,7 @@ from make_dataset import frame_done, parse_shard, scene_dir  # noqa: E402
 def main(argv):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", help="the rebuilt data set folder")
-    p.add_argument("manifest", help="the committed manifest (make_dataset.py --export)")
+    p.add_argument("manifest", help="the committed manifest (make_dataset.py --export, export_manifest.py)")
     p.add_argument("--shard", type=parse_shard, default=(0, 1), help="i/n: only this shard's scenes")
     p.add_argument("--rel-mean", type=float, default=0.03, help="relative tolerance of channel means")
     p.add_argument("--rel-std", type=float, default=0.10, help="relative tolerance of channel deviations")

@@ -56,6 +56,8 @@ def combined_rgb(channels, path):
             rgb = [stem + c for c in (("R", "G", "B") if suffix.endswith("R") else ("Red", "Green", "Blue"))]
             if all(n in channels for n in rgb):
                 return np.stack([channels[n].astype(np.float64) for n in rgb], axis=-1)
+    if all(c in channels for c in "RGB"):  # Mitsuba's frames: plain R, G, B
+        return np.stack([channels[c].astype(np.float64) for c in "RGB"], axis=-1)
     raise CheckError("%s: no Combined R, G, B channels" % path)
 
 
