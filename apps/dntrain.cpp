@@ -367,8 +367,14 @@ void stampProvenance(ModelInfo& info, const Options& o) {
   info.notes["command"] = o.commandLine;
 }
 
-// The model to train, described by its ModelInfo (training options go in notes,
-// so a checkpoint only resumes the run it belongs to).
+// A model continued with --init: the init file's provenance notes described how
+// that file was written, not this one, so they give way to its name.
+void markContinued(ModelInfo& info, const Options& o) {
+  info.notes.erase("command");
+  info.notes.erase("software");
+  info.notes["init_model"] = fs::path(o.init).filename().string();
+}
+
 // The extra buffers a Control Module over the OIDN base reads: --aux, or the
 // default aux buffers that the base does not see.
 std::vector<std::string> extraBuffers(const std::string& spec, const OidnInputSet& set) {
@@ -387,7 +393,7 @@ std::pair<ModelInfo, OidnControlled> buildOidnControlled(const Options& o, Loade
     if (!info.has_control) throw IoError(o.init + ": has no Control Module to continue");
     if (info.oidn.control.diffusion != (o.mode == "control"))
       throw IoError(o.init + ": was trained with the other objective");
-    info.notes["init_model"] = fs::path(o.init).filename().string();
+    markContinued(info, o);
     return {info, loaded.oidnControlled};
   }
   if (info.has_control)
@@ -431,6 +437,8 @@ void noteTrainingSettings(ModelInfo& info, const Options& o) {
   if (o.worldSize > 1) info.notes["train.world_size"] = std::to_string(o.worldSize);
 }
 
+// The model to train, described by its ModelInfo (training options go in notes,
+// so a checkpoint only resumes the run it belongs to).
 BuiltModel buildModel(const Options& o) {
   if (o.mode != "base") {
     LoadedModel loaded = loadModelFile(o.init.empty() ? o.base : o.init);
@@ -455,7 +463,7 @@ BuiltModel buildModel(const Options& o) {
     if (!loaded.info.has_control) throw IoError(o.init + ": has no Control Module to continue");
     info = loaded.info;
     model = loaded.model;
-    info.notes["init_model"] = fs::path(o.init).filename().string();
+    markContinued(info, o);
   } else {
     const LoadedModel base = loadModelFile(o.base);
     if (base.info.has_control) throw IoError(o.base + ": is a controlled model, not a base prior");

@@ -184,6 +184,16 @@ def main():
     check("the reference render itself: measured noise x1, the tuned skip",
           out.returncode == 0 and level and abs(float(level.group(2)) - 1.0) < 0.01
           and int(level.group(3)) == 2, out.stderr)
+    # Continuing a file whose notes name the command that wrote it: those notes are not carried over.
+    out = run([dntrain, "control", "--data", data, "--init", p("measured.dnm"), "--steps", "1",
+               "--val-every", "0", "--out", p("continued.dnm")] + tiny)
+    with open(p("measured.dnm"), "rb") as f:
+        before = f.read(1 << 16).decode("latin-1")
+    with open(p("continued.dnm"), "rb") as f:
+        after = f.read(1 << 16).decode("latin-1")
+    check("dntrain control --init: the init file's command note gives way to init_model",
+          out.returncode == 0 and "note.command=" in before and "note.command=" not in after
+          and "note.init_model=measured.dnm" in after, out.stderr)
     expect_error("dntrain defaults --noise-reference of a missing file",
                  [dntrain, "defaults", "--model", p("adaptive.dnm"), "--noise-reference",
                   p("nope.exr"), "--out", p("x4.dnm")], "nope.exr", p("x4.dnm"))
