@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The small committed manifest of a data set already on disk, in the format check_dataset.py reads.
 
-  python3 scenegen/export_manifest.py /work/data/mitsuba256 scenegen/mitsuba128.json
+  python3 scenegen/export_manifest.py /work/data/mitsuba256 scenegen/mitsuba128.json --first-seed 100000 --scenes 200
 
 make_dataset.py writes the Blender set's manifest itself (make data-manifest); this one is
 for sets made by other generators (scenegen/mitsuba_gen.py), read from the frames' meta.json.
@@ -26,6 +26,8 @@ def main(argv):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", help="the data set folder (train/, val/, test/)")
     p.add_argument("out", help="the manifest to write")
+    p.add_argument("--first-seed", type=int, required=True, help="the generator's seed range, as it was given")
+    p.add_argument("--scenes", type=int, required=True)
     args = p.parse_args(argv)
     scenes, settings, versions = {}, None, set()
     for path in sorted(glob.glob(os.path.join(args.data, "*", "scene_*", "frame_*", "meta.json"))):
@@ -37,6 +39,8 @@ def main(argv):
             settings = mine
         elif mine != settings:
             sys.exit("export_manifest.py: %s: settings %s differ from the set's %s" % (path, mine, settings))
+        if not args.first_seed <= meta["seed"] < args.first_seed + args.scenes:
+            sys.exit("export_manifest.py: %s: seed %d is outside the range given" % (path, meta["seed"]))
         versions.add(meta.get("generator_version", "?"))
         fdir = os.path.dirname(path)
         frame = {"frame": meta["frame"], "archetype": meta.get("archetype", "?"),
@@ -50,7 +54,7 @@ def main(argv):
     for s in listed:
         counts[s["split"]] += 1
     manifest = {"generator_versions": sorted(versions), "blender_version": None, "settings": settings,
-                "seeds": {"first": min(scenes), "last": max(scenes)}, "scene_counts": counts,
+                "seeds": {"first": args.first_seed, "count": args.scenes}, "scene_counts": counts,
                 "frame_count": sum(len(s["frames"]) for s in listed), "frame_counts": count_frames(listed),
                 "scenes": listed}
     export_checks(manifest, args.out)
