@@ -590,9 +590,11 @@ int run(Options o, int argc, char** argv) {
                  "dndenoise: {}: {}, exposure x{:.3g}, {} network steps, {} tile(s) of {} px, "
                  "{:.2f} s (median of {}), {:.2f} s/MPix\n",
                  name,
-                 result.steered ? (denoiser.info().oidn.control.diffusion
-                                       ? "pretrained base + Control Module, diffusion refinement"
-                                       : "pretrained base + Control Module, one pass")
+                 result.steered
+                     ? fmt::format("pretrained base + Control Module, {}{}",
+                                   denoiser.info().oidn.control.diffusion ? "diffusion refinement"
+                                                                          : "one pass",
+                                   result.prefiltered ? ", albedo and normal prefiltered" : "")
                  : result.lightPathsSplit
                      ? "pretrained base, albedo and normal prefiltered, diffuse part apart"
                  : result.prefiltered ? "pretrained base, albedo and normal prefiltered"

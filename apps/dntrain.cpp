@@ -83,14 +83,19 @@ options:
   --data DIR[,DIR...]   data set roots (docs/dataset.md); training uses split 'train'
   --photos DIR          folder of photographs for the prior (repeatable)
   --base FILE           pretrained prior (control, regression)
-  --init FILE           control: continue training the Control Module of this model
-                        (its prior stays frozen; its sampling defaults are kept)
+  --init FILE           control, regression: continue training the Control Module of
+                        this model (its base stays frozen; its sampling defaults are
+                        kept); regression only over the OIDN base
   --out FILE            model file written at the end (EMA weights)
   --aux LIST|default|none  control inputs (default: Denoising Data + diffuse/glossy/
                         transmission light passes); none = the radiance-only ablation
   --sigmas LIST         control over OIDN: the noise levels dndenoise refines at,
                         noisiest first (default 0.05,0.02)
   --hint-channels N     control over OIDN: width of the hint network (default 32)
+  --steer SET           control over OIDN: the base network the module steers:
+                        hdr_alb_nrm (default; noisy albedo and normal) or
+                        hdr_calb_cnrm_large (OIDN's prefilter mode: albedo and normal
+                        cleaned by the base's own networks first)
   --steps N             total optimizer steps, >= 1 (default 2000); raise it and --resume
                         to extend
   --batch N             batch size, 1-1024 (default 8)
@@ -148,6 +153,7 @@ struct Options {
   std::string variant = "default";
   std::vector<std::string> photos, noiseReference;
   std::string aux = "default", prediction = "eps", sigmas = "0.05,0.02";
+  std::string steer = "hdr_alb_nrm";
   int64_t hintChannels = 32;
   int64_t cacheGb = 4;
   std::vector<int> spp = {4, 16, 32};  // the training set's 8 stacks of 4 spp
@@ -214,6 +220,8 @@ Options parseArgs(int argc, char** argv) {
       o.aux = args.value("--aux");
     else if (args.flag("--sigmas"))
       o.sigmas = args.value("--sigmas");
+    else if (args.flag("--steer"))
+      o.steer = args.value("--steer");
     else if (args.flag("--hint-channels"))
       o.hintChannels = args.intValue("--hint-channels", 1, 1024);
     else if (args.flag("--cache-gb"))
@@ -328,8 +336,13 @@ Options parseArgs(int argc, char** argv) {
   if (o.out.empty()) throw cli::UsageError("--out is required");
   if (o.mode != "base" && (o.base.empty() == o.init.empty() || o.data.empty()))
     throw cli::UsageError(o.mode + " needs --data and one of --base or --init");
-  if (!o.init.empty() && o.mode != "control")
-    throw cli::UsageError("--init continues a controlled model: control only");
+  if (!o.init.empty() && o.mode == "base")
+    throw cli::UsageError("--init continues a controlled model: control or regression");
+  try {
+    oidnInputSet(o.steer);
+  } catch (const std::invalid_argument& e) {
+    throw cli::UsageError(std::string("--steer: ") + e.what());
+  }
   if (o.maxTimestep < 0 || !(o.renderStart >= 0.0 && o.renderStart <= 1.0))
     throw cli::UsageError("--max-timestep must be >= 0 and --render-start in [0, 1]");
   if (o.mode == "base" && o.data.empty() && o.photos.empty())
@@ -399,11 +412,16 @@ std::pair<ModelInfo, OidnControlled> buildOidnControlled(const Options& o, Loade
   if (info.has_control)
     throw IoError(o.base + ": already has a Control Module (continue it with --init)");
   OidnControlConfig& c = info.oidn.control;
-  c.input_set = "hdr_alb_nrm";
+  c.input_set = o.steer;
   const OidnInputSet& set = oidnInputSet(c.input_set);
+  if (set.buffers.size() != 3)
+    throw IoError("--steer " + o.steer + ": the module steers a colour + albedo + normal network");
   if (std::find(info.oidn.input_sets.begin(), info.oidn.input_sets.end(), c.input_set) ==
       info.oidn.input_sets.end())
-    throw IoError(o.base + ": has no colour + albedo + normal network to steer");
+    throw IoError(o.base + ": has no " + c.input_set + " network to steer");
+  if (set.cleanAux && !loaded.oidn->canPrefilter())
+    throw IoError(o.base + ": has no albedo and normal networks to clean " + c.input_set +
+                  "'s inputs");
   c.extra_buffers = extraBuffers(o.aux, set);
   c.hint_channels = o.hintChannels;
   c.diffusion = o.mode == "control";
@@ -459,6 +477,8 @@ BuiltModel buildModel(const Options& o) {
   } else if (!o.init.empty()) {
     // Fine-tuning: the file's prior stays frozen, its Control Module trains on,
     // and its sampling defaults are kept.
+    if (o.mode != "control")
+      throw IoError(o.init + ": regression --init continues a module over the OIDN base only");
     LoadedModel loaded = loadModelFile(o.init);
     if (!loaded.info.has_control) throw IoError(o.init + ": has no Control Module to continue");
     info = loaded.info;

@@ -204,31 +204,60 @@ TEST_CASE("dndenoise's path: an untrained Control Module denoises exactly as the
       fs::temp_directory_path() / ("dn_ctl_denoise_" + std::to_string(getpid()) + ".dnm");
   LoadedModel base = loadModelFile(std::string(DN_SOURCE_DIR) + "/models/oidn.dnm");
   const FrameBuffers frame = readFrame(kCrop);
-  DenoiseOptions options;
-  options.prefilter = false;  // the module steers the network for noisy albedo and normal
-  const Image expected = Denoiser(base).denoise(frame, options).color;
-  options.control = ControlUse::Always;
-  for (bool diffusion : {false, true}) {
-    CAPTURE(diffusion);
-    ModelInfo info = base.info;
-    info.has_control = true;
-    info.oidn.control = controlConfig(diffusion);
-    if (diffusion) info.oidn.sigmas = {0.05, 0.02};
-    OidnControlled model(base.oidn, info.oidn.control);
-    saveModelFile(path, info, *model);
-    const Denoiser denoiser = Denoiser::fromFile(path);
-    REQUIRE(denoiser.controlApplies(frame.names()));
-    options.samples = 2;
-    const DenoiseResult result = denoiser.denoise(frame, options);
-    CHECK(result.color.pixels == expected.pixels);
-    CHECK(result.steps == (diffusion ? 3 : 1));
-    if (diffusion) {
-      REQUIRE(result.uncertainty.pixels.size() > 0);
-      CHECK(*std::max_element(result.uncertainty.pixels.begin(), result.uncertainty.pixels.end()) ==
-            0.0f);
+  // The network for noisy albedo and normal, and the prefilter mode's, whose
+  // guides dndenoise cleans first as the base alone does.
+  for (const std::string steer : {"hdr_alb_nrm", "hdr_calb_cnrm_large"}) {
+    const bool prefiltered = steer != "hdr_alb_nrm";
+    DenoiseOptions options;
+    options.prefilter = prefiltered;
+    options.lightPaths = false;
+    const Image expected = Denoiser(base).denoise(frame, options).color;
+    options.control = ControlUse::Always;
+    for (bool diffusion : {false, true}) {
+      CAPTURE(steer);
+      CAPTURE(diffusion);
+      ModelInfo info = base.info;
+      info.has_control = true;
+      info.oidn.control = controlConfig(diffusion);
+      info.oidn.control.input_set = steer;
+      if (diffusion) info.oidn.sigmas = {0.05, 0.02};
+      OidnControlled model(base.oidn, info.oidn.control);
+      saveModelFile(path, info, *model);
+      const Denoiser denoiser = Denoiser::fromFile(path);
+      REQUIRE(denoiser.controlApplies(frame.names()));
+      options.samples = 2;
+      const DenoiseResult result = denoiser.denoise(frame, options);
+      CHECK(result.color.pixels == expected.pixels);
+      CHECK(result.prefiltered == prefiltered);
+      CHECK(result.steps == (prefiltered ? 2 : 0) + (diffusion ? 3 : 1));
+      if (diffusion) {
+        REQUIRE(result.uncertainty.pixels.size() > 0);
+        CHECK(*std::max_element(result.uncertainty.pixels.begin(),
+                                result.uncertainty.pixels.end()) == 0.0f);
+      }
     }
   }
   fs::remove(path);
+}
+
+TEST_CASE("training's prefilter on tensors equals dndenoise's on the frame") {
+  // Both pad the frame alike to the alignment, so they see the same pixels.
+  LoadedModel base = loadModelFile(std::string(DN_SOURCE_DIR) + "/models/oidn.dnm");
+  base.oidn->eval();
+  const FrameBuffers frame = readFrame(kCrop);
+  c10::InferenceMode inference;
+  const torch::Tensor clean =
+      cleanAux(base.oidn, imageToTensor(frame.get("albedo")), imageToTensor(frame.get("normal")));
+  const char* sets[] = {"alb", "nrm"};
+  for (int i = 0; i < 2; ++i) {
+    CAPTURE(sets[i]);
+    OidnUNet net = base.oidn->net(sets[i]);
+    const torch::Tensor expected = runOidn(net, oidnInputSet(sets[i]), frame, {}).image;
+    const torch::Tensor got = clean.narrow(1, 3 * i, 3);
+    CHECK(torch::allclose(got, expected, 1e-4, 1e-5));
+    CHECK((got - imageToTensor(frame.get(i == 0 ? "albedo" : "normal"))).abs().max().item<float>() >
+          0.01f);  // the networks did clean something
+  }
 }
 
 TEST_CASE("the trained Control Module denoises a splatted render that OIDN leaves noisy") {

@@ -226,6 +226,19 @@ def main():
                  [dntrain, "rebase", "--model", shipped, "--base", p("prior.dnm"), "--out", p("x4.dnm")],
                  p("prior.dnm"), p("x4.dnm"))
 
+    # A module over the prefilter mode's large network: dndenoise cleans its guides first.
+    out = run([dntrain, "regression", "--data", data, "--base", base, "--steer", "hdr_calb_cnrm_large",
+               "--steps", "1", "--val-every", "0", "--out", p("large.dnm")] + tiny)
+    check("dntrain regression --steer hdr_calb_cnrm_large: exit 0", out.returncode == 0, out.stderr)
+    out = run([dndenoise, "--model", p("large.dnm"), "--control", "on", "--threads", "1", "-v", frame,
+               "-o", p("large.exr")])
+    check("dndenoise runs it with the guides prefiltered", out.returncode == 0
+          and "Control Module, one pass, albedo and normal prefiltered, exposure" in out.stderr, out.stderr)
+    for steer in ("hdr", "nope"):
+        expect_error(f"dntrain regression --steer {steer}",
+                     [dntrain, "regression", "--data", data, "--base", base, "--steer", steer,
+                      "--out", p("x5.dnm")], steer, p("x5.dnm"))
+
     out = run(base_cmd + ["--rgb-only", frame, "-o", p("rgb.exr")])
     check("--rgb-only writes R,G,B only", out.returncode == 0 and set(channels_of(p("rgb.exr"))) == {"R", "G", "B"})
 

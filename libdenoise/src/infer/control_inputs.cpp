@@ -28,7 +28,35 @@ torch::Tensor perSample(const torch::Tensor& values, const torch::Tensor& like) 
   return values.to(torch::kFloat32).view({like.size(0), 1, 1, 1});
 }
 
+// A network on a batch zero-padded to the alignment, cut back to its size.
+torch::Tensor runAligned(OidnUNet net, const torch::Tensor& x) {
+  const int64_t h = x.size(2), w = x.size(3);
+  const int64_t padH = (kOidnAlignment - h % kOidnAlignment) % kOidnAlignment;
+  const int64_t padW = (kOidnAlignment - w % kOidnAlignment) % kOidnAlignment;
+  return net->forward(torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0))
+      .narrow(2, 0, h)
+      .narrow(3, 0, w);
+}
+
+torch::Tensor nonNegative(const torch::Tensor& x) {
+  return torch::nan_to_num(x, 0.0, 0.0, 0.0).clamp_min(0.0);
+}
+
 }  // namespace
+
+torch::Tensor cleanAux(const OidnBase& base, const torch::Tensor& albedo,
+                       const torch::Tensor& normal) {
+  const torch::Tensor a = torch::nan_to_num(albedo, 0.0, 0.0, 0.0).clamp(0.0, 1.0);
+  const torch::Tensor srgb =
+      torch::where(a <= 0.0031308, 12.92 * a, 1.055 * a.pow(1 / 2.4) - 0.055);
+  const torch::Tensor y = nonNegative(runAligned(base->net("alb"), srgb));
+  const torch::Tensor cleanAlbedo =
+      torch::where(y <= 0.04045, y / 12.92, ((y + 0.055) / 1.055).pow(2.4)).clamp_max(1.0);
+  const torch::Tensor n = torch::nan_to_num(normal, 0.0, 0.0, 0.0).clamp(-1.0, 1.0) * 0.5 + 0.5;
+  const torch::Tensor cleanNormal =
+      (nonNegative(runAligned(base->net("nrm"), n)) * 2.0 - 1.0).clamp(-1.0, 1.0);
+  return torch::cat({cleanAlbedo, cleanNormal}, 1);
+}
 
 torch::Tensor puEncode(const torch::Tensor& radiance) {
   return elementwise(radiance, [](float v) {

@@ -34,6 +34,27 @@ Image transposed(const Image& image) {
   return out;
 }
 
+// The frame's albedo or normal (setName "alb" or "nrm") denoised by the base's own network.
+Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& frame,
+                 const OidnRunOptions& options) {
+  OidnUNet net = base->net(setName);
+  net->to(options.device);
+  return tensorToImage(runOidn(net, oidnInputSet(setName), frame, options).image);
+}
+
+// The frame's colour with its albedo and normal cleaned: the inputs of the
+// prefilter mode's colour network.
+FrameBuffers withCleanAux(const OidnBase& base, const FrameBuffers& frame,
+                          const OidnRunOptions& albedoRun, const OidnRunOptions& normalRun) {
+  FrameBuffers clean;
+  clean.width = frame.width;
+  clean.height = frame.height;
+  clean.buffers["color"] = frame.get("color");
+  clean.buffers["albedo"] = cleanedAux(base, "alb", frame, albedoRun);
+  clean.buffers["normal"] = cleanedAux(base, "nrm", frame, normalRun);
+  return clean;
+}
+
 // OIDN's prefilter mode: the albedo and the normal are denoised by their own
 // networks, then the colour by the large network trained with noise-free albedo
 // and normal. With the light-path split (dn/infer/light_paths.h) the diffuse
@@ -59,18 +80,8 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
     if (options.progress) o.progress = [&, k](double f) { options.progress((k + f) / runs); };
     return o;
   };
-  auto cleaned = [&](const char* setName, const FrameBuffers& source) {
-    const OidnInputSet& set = oidnInputSet(setName);
-    OidnUNet net = base->net(setName);
-    net->to(options.device);
-    return tensorToImage(runOidn(net, set, source, next()).image);
-  };
-  FrameBuffers clean;
-  clean.width = frame.width;
-  clean.height = frame.height;
-  clean.buffers["color"] = frame.get("color");
-  clean.buffers["albedo"] = cleaned("alb", frame);
-  clean.buffers["normal"] = cleaned("nrm", frame);
+  const OidnRunOptions albedoRun = next(), normalRun = next();  // in this order: progress
+  const FrameBuffers clean = withCleanAux(base, frame, albedoRun, normalRun);
   const OidnInputSet& set = oidnInputSet("hdr_calb_cnrm_large");
   OidnUNet net = base->net(set.name);
   net->to(options.device);
@@ -81,7 +92,7 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
   part.width = frame.height;
   part.height = frame.width;
   part.buffers["albedo"] = transposed(frame.get("diffuse_color"));
-  part.buffers["albedo"] = cleaned("alb", part);
+  part.buffers["albedo"] = cleanedAux(base, "alb", part, next());
   part.buffers["normal"] = transposed(clean.get("normal"));
   LightPathSplit split = splitDiffuse(frame);  // each part freed once transposed
   part.buffers["color"] = transposed(std::exchange(split.diffuse, Image()));
@@ -371,6 +382,8 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
   run.device = options.device;
   run.exposure = exposure;
   run.tile = options.tile;
+  OidnRunOptions auxRun = run;
+  auxRun.maxMemoryBytes = options.maxMemoryBytes;
   // The control's encoder copy and the hint network run beside the base.
   run.maxMemoryBytes = options.maxMemoryBytes / 1.5;
   torch::Tensor noise;  // full-frame, so that overlapping tiles agree
@@ -394,6 +407,8 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
     });
   };
 
+  // A module over the prefilter mode's network sees the guides cleaned, as it trained.
+  const FrameBuffers clean = set.cleanAux ? withCleanAux(oidnBase(), frame, auxRun, auxRun) : frame;
   torch::Tensor sum, sumSquares;
   OidnRunResult out;
   for (int k = 0; k < samples; ++k) {
@@ -401,7 +416,7 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
     noise = torch::randn({1, 3, frame.height, frame.width}, generator);
     if (options.progress) run.progress = [&, k](double f) { options.progress((k + f) / samples); };
     OidnUNet steered = model->steered();
-    out = runOidn(steered, set, frame, run);
+    out = runOidn(steered, set, clean, run);
     sum = k == 0 ? out.image : sum + out.image;
     if (samples > 1) sumSquares = k == 0 ? out.image.square() : sumSquares + out.image.square();
   }
@@ -414,7 +429,8 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
     result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
   }
   result.exposure = out.exposure;
-  result.steps = 1 + int64_t(sigmas.size());
+  result.prefiltered = set.cleanAux;
+  result.steps = (set.cleanAux ? 3 : 1) + int64_t(sigmas.size());
   result.steered = true;
   result.tileSize = out.tileSize;
   result.tileCount = out.tileCount;

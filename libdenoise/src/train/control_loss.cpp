@@ -26,8 +26,13 @@ torch::Tensor controlLoss(OidnControlledImpl& model, const ModelInfo& info, cons
   TORCH_CHECK(batch.aux.defined() && batch.aux.size(1) == baseAux + config.extraChannels(),
               "batch aux must hold the base's buffers and the extras");
   const torch::Tensor exposure = batchExposure(batch.noisy);
+  torch::Tensor guides = batch.aux.narrow(1, 0, baseAux);
+  if (set.cleanAux) {  // the prefilter mode's network: its guides cleaned first, as dndenoise does
+    torch::NoGradGuard noGrad;
+    guides = cleanAux(model.base(), guides.narrow(1, 0, 3), guides.narrow(1, 3, 3));
+  }
   const torch::Tensor baseInput =
-      oidnBaseInput(torch::cat({batch.noisy, batch.aux.narrow(1, 0, baseAux)}, 1), set, exposure);
+      oidnBaseInput(torch::cat({batch.noisy, guides}, 1), set, exposure);
   const torch::Tensor target = puEncode(batch.target * exposure.view({b, 1, 1, 1}));
 
   const torch::Tensor keep =

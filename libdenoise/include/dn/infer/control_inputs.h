@@ -23,6 +23,13 @@ torch::Tensor puDecode(const torch::Tensor& encoded);
 torch::Tensor oidnBaseInput(const torch::Tensor& buffers, const OidnInputSet& set,
                             const torch::Tensor& exposure);
 
+// OIDN's prefilter on a batch: linear albedo and normal (B, 3, H, W each)
+// denoised by the base's "alb" and "nrm" networks, computed as runOidn does
+// on a frame (sRGB albedo, mapped normals, padded to the alignment).
+// (B, 6, H, W): the clean albedo, then the clean normal.
+torch::Tensor cleanAux(const OidnBase& base, const torch::Tensor& albedo,
+                       const torch::Tensor& normal);
+
 // The hint input (B, config.hintChannels(), H, W): the extra buffers
 // (B, config.extraChannels(), H, W, linear; light passes scaled by exposure and
 // PU-encoded like the colour, colour passes clamped, depth log-compressed),
