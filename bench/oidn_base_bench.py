@@ -94,10 +94,10 @@ def benchmark_seconds(size, repeats, threads):
     return float(m.group(1)) / 1000.0
 
 
-def dndenoise_run(binary, model, frame, out, repeats, threads, prefilter, light_paths):
+def dndenoise_run(binary, model, frame, out, repeats, threads, prefilter, light_paths, flags):
     cmd = ["/usr/bin/time", "-v", os.path.join(binary, "dndenoise"), "--model", model, "--rgb-only",
            "--prefilter", "on" if prefilter else "off", "--light-paths", "on" if light_paths else "off",
-           "--threads", str(threads), "-n", str(repeats),
+           "--threads", str(threads), "-n", str(repeats), *flags.split(),
            frame, "-o", out]
     res = subprocess.run(cmd, capture_output=True, text=True)
     m = re.search(r"([\d.]+) s \(median of \d+\)", res.stderr)
@@ -118,12 +118,14 @@ def main():
     ap.add_argument("--prefilter", action="store_true", help="both in OIDN's prefilter mode")
     ap.add_argument("--light-paths", action="store_true",
                     help="with --prefilter: dndenoise also splits off the diffuse part")
+    ap.add_argument("--flags", default="", help="more dndenoise flags, e.g. '--control on'")
     args = ap.parse_args()
     if args.light_paths and not args.prefilter:
         ap.error("--light-paths needs --prefilter")
     mode = ("prefilter mode, dndenoise with the light-path split; " if args.light_paths
             else "prefilter mode; " if args.prefilter else "")
-    print(f"model {args.model}; {mode}{args.threads} threads; median of {args.repeats} runs per round, "
+    flags = f"dndenoise {args.flags}; " if args.flags else ""
+    print(f"model {args.model}; {mode}{flags}{args.threads} threads; median of {args.repeats} runs per round, "
           f"{args.rounds} rounds alternating")
     print(f"{'frame':>10} {'OIDN s/MPix':>11} {'ours s/MPix':>11} {'ours/OIDN':>9} {'ours peak RSS GB':>16}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -136,7 +138,8 @@ def main():
             for _ in range(args.rounds):
                 oidn.append(oidn_seconds(size, args.repeats, args.threads, args.prefilter) / mpix)
                 seconds, peak = dndenoise_run(args.bin, args.model, frame, os.path.join(tmp, "out.exr"),
-                                              args.repeats, args.threads, args.prefilter, args.light_paths)
+                                              args.repeats, args.threads, args.prefilter, args.light_paths,
+                                              args.flags)
                 ours.append(seconds / mpix)
                 rss = max(rss, peak)
             ratios = sorted(o / b for o, b in zip(ours, oidn))

@@ -11,6 +11,7 @@ spp, as dnmetrics computes them; per-file metrics in WORK/<name>/metrics.json.
   eval_sets.py --name ctl -- --model /work/train/diff.dnm --sigmas 0.05,0.02   dndenoise with these flags
   eval_sets.py --name ctl --reuse -- ...               the same, keeping results already made (new renders only)
   eval_sets.py --table noisy oidn ctl                  a Markdown table of stored results
+  eval_sets.py --compare oidn ctl                      per set, the frames where ctl beats oidn
   eval_sets.py --table noisy,oidn,ctl oidn_alb,ctl_alb one table per comma list
   eval_sets.py --table 'colour + albedo:oidn_alb,ctl_alb'   ... with a heading
 
@@ -152,6 +153,18 @@ def table_lines(results, names):
     return lines
 
 
+def compare(args, a, b):
+    """Per set, on how many frames `b` beats `a` (PSNR higher, FLIP lower), and the PSNR range."""
+    results, _ = load_results(args.work, [a, b])
+    keys = set(results[a]) & set(results[b])
+    for group in sorted({k[0] for k in keys}):
+        ks = [k for k in keys if k[0] == group]
+        d = [results[b][k]["psnr"] - results[a][k]["psnr"] for k in ks]
+        lower = sum(results[b][k]["flip"] < results[a][k]["flip"] for k in ks)
+        print(f"{group}: {b} against {a}: PSNR higher on {sum(x > 0 for x in d)} of {len(ks)} "
+              f"({min(d):+.2f} to {max(d):+.2f} dB), FLIP lower on {lower}")
+
+
 def figure_lines(args, names, spec, folder, results_path):
     """A PNG strip: the input, OIDN's result, the last method's, the reference (one set/scene/spp)."""
     import numpy as np
@@ -247,6 +260,7 @@ def main():
     p.add_argument("--name", help="name of the method (output subfolder)")
     p.add_argument("--oidn", action="store_true", help="run OIDN (pyoidn) instead of dndenoise")
     p.add_argument("--table", nargs="+", metavar="NAME", help="print a table of stored results")
+    p.add_argument("--compare", nargs=2, metavar=("A", "B"), help="count the frames where B beats A")
     p.add_argument("--results", help="with --table: write it into this file's eval_sets section instead")
     p.add_argument("--figure", action="append", default=[], metavar="SET/SCENE:SPP",
                    help="with --results: noisy | oidn | the last table's last method | reference "
@@ -262,12 +276,14 @@ def main():
     args, extra = p.parse_known_args()
     if extra and extra[0] == "--":
         extra = extra[1:]
-    if args.table:
+    if args.compare:
+        compare(args, *args.compare)
+    elif args.table:
         table(args, args.table)
     elif args.name:
         evaluate(args, extra)
     else:
-        p.error("give --name (evaluate) or --table")
+        p.error("give --name (evaluate), --table or --compare")
 
 
 if __name__ == "__main__":

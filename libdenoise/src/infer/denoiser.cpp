@@ -408,7 +408,9 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
   };
 
   // A module over the prefilter mode's network sees the guides cleaned, as it trained.
-  const FrameBuffers clean = set.cleanAux ? withCleanAux(oidnBase(), frame, auxRun, auxRun) : frame;
+  FrameBuffers cleaned;
+  if (set.cleanAux) cleaned = withCleanAux(oidnBase(), frame, auxRun, auxRun);
+  const FrameBuffers& input = set.cleanAux ? cleaned : frame;
   torch::Tensor sum, sumSquares;
   OidnRunResult out;
   for (int k = 0; k < samples; ++k) {
@@ -416,7 +418,7 @@ DenoiseResult Denoiser::denoiseWithControl(const FrameBuffers& frame,
     noise = torch::randn({1, 3, frame.height, frame.width}, generator);
     if (options.progress) run.progress = [&, k](double f) { options.progress((k + f) / samples); };
     OidnUNet steered = model->steered();
-    out = runOidn(steered, set, clean, run);
+    out = runOidn(steered, set, input, run);
     sum = k == 0 ? out.image : sum + out.image;
     if (samples > 1) sumSquares = k == 0 ? out.image.square() : sumSquares + out.image.square();
   }
