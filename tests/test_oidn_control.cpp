@@ -167,6 +167,13 @@ TEST_CASE("inputs built from tensors equal OIDN's own") {
       oidnBaseInput(torch::cat(parts, 1), set, torch::tensor({exposure}));
   CHECK(torch::equal(fromTensors, oidnInput(frame, set, exposure, all)));
   CHECK(batchExposure(parts[0]).item<float>() == exposure);
+  for (const char* name : {"alb", "nrm"}) {  // the prefilter's networks, unexposed
+    CAPTURE(name);
+    const OidnInputSet& auxSet = oidnInputSet(name);
+    CHECK(torch::equal(
+        oidnBaseInput(imageToTensor(frame.get(auxSet.denoised())), auxSet, torch::ones({1})),
+        oidnInput(frame, auxSet, 1.0f, all)));
+  }
 
   const auto [extras, present] = frameExtras(frame, controlConfig(false), all);
   CHECK(extras.size(1) == controlConfig(false).extraChannels());

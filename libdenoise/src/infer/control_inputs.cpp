@@ -7,6 +7,7 @@
 #include <ATen/Parallel.h>
 
 #include "dn/infer/model_inputs.h"
+#include "dn/infer/oidn_filter.h"
 #include "dn/tonemap.h"
 
 namespace dn {
@@ -38,24 +39,17 @@ torch::Tensor runAligned(OidnUNet net, const torch::Tensor& x) {
       .narrow(3, 0, w);
 }
 
-torch::Tensor nonNegative(const torch::Tensor& x) {
-  return torch::nan_to_num(x, 0.0, 0.0, 0.0).clamp_min(0.0);
-}
-
 }  // namespace
 
 torch::Tensor cleanAux(const OidnBase& base, const torch::Tensor& albedo,
                        const torch::Tensor& normal) {
-  const torch::Tensor a = torch::nan_to_num(albedo, 0.0, 0.0, 0.0).clamp(0.0, 1.0);
-  const torch::Tensor srgb =
-      torch::where(a <= 0.0031308, 12.92 * a, 1.055 * a.pow(1 / 2.4) - 0.055);
-  const torch::Tensor y = nonNegative(runAligned(base->net("alb"), srgb));
-  const torch::Tensor cleanAlbedo =
-      torch::where(y <= 0.04045, y / 12.92, ((y + 0.055) / 1.055).pow(2.4)).clamp_max(1.0);
-  const torch::Tensor n = torch::nan_to_num(normal, 0.0, 0.0, 0.0).clamp(-1.0, 1.0) * 0.5 + 0.5;
-  const torch::Tensor cleanNormal =
-      (nonNegative(runAligned(base->net("nrm"), n)) * 2.0 - 1.0).clamp(-1.0, 1.0);
-  return torch::cat({cleanAlbedo, cleanNormal}, 1);
+  const torch::Tensor unexposed = torch::ones({albedo.size(0)});
+  auto clean = [&](const char* setName, const torch::Tensor& buffer) {
+    const OidnInputSet& set = oidnInputSet(setName);
+    return oidnOutputDecode(runAligned(base->net(setName), oidnBaseInput(buffer, set, unexposed)),
+                            set, 1.0f);
+  };
+  return torch::cat({clean("alb", albedo), clean("nrm", normal)}, 1);
 }
 
 torch::Tensor puEncode(const torch::Tensor& radiance) {
@@ -79,6 +73,8 @@ torch::Tensor oidnBaseInput(const torch::Tensor& buffers, const OidnInputSet& se
     if (set.buffers[b] == "color")
       // Multiplied in float as oidnInput does, before the PU curve.
       parts.push_back(puEncode(x * perSample(exposure, x)));
+    else if (set.buffers[b] == "albedo" && b == 0)  // the albedo network's own input
+      parts.push_back(elementwise(x.clamp(0.0, 1.0), tonemap::srgbEncode));
     else if (set.buffers[b] == "albedo")
       parts.push_back(x.clamp(0.0, 1.0));
     else

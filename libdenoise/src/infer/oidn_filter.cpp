@@ -13,13 +13,6 @@ namespace {
 
 float nanToZero(float v) { return std::isnan(v) ? 0.0f : v; }
 
-// OIDN's sRGB transfer function, which its albedo network works in.
-float srgbEncode(float y) {
-  return y <= 0.0031308f ? 12.92f * y : 1.055f * std::pow(y, 1 / 2.4f) - 0.055f;
-}
-float srgbDecode(float x) {
-  return x <= 0.04045f ? x / 12.92f : std::pow((x + 0.055f) / 1.055f, 2.4f);
-}
 float encodeNormal(float v) { return std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f; }
 
 // Fills three planes of `out` (h x w each) from a 3-channel image, or from a
@@ -53,9 +46,9 @@ torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, floa
       fillPlanes(frame.get(name), r, out, [exposure](float v) {
         return tonemap::pu(std::clamp(v * exposure, 0.0f, std::numeric_limits<float>::max()));
       });
-    else if (name == "albedo" && b == 0)  // the albedo network's own input
+    else if (name == "albedo" && b == 0)  // the albedo network's own input, in sRGB
       fillPlanes(frame.get(name), r, out,
-                 [](float v) { return srgbEncode(std::clamp(v, 0.0f, 1.0f)); });
+                 [](float v) { return tonemap::srgbEncode(std::clamp(v, 0.0f, 1.0f)); });
     else if (name == "albedo")
       fillPlanes(frame.get(name), r, out, [](float v) { return std::clamp(v, 0.0f, 1.0f); });
     else
@@ -79,7 +72,7 @@ torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& 
   if (set.denoised() == "color")
     decode([&](float v) { return std::min(tonemap::puInverse(v) * scale, kMax); });
   else if (set.denoised() == "albedo")
-    decode([](float v) { return std::min(srgbDecode(v), 1.0f); });
+    decode([](float v) { return std::min(tonemap::srgbDecode(v), 1.0f); });
   else
     decode([](float v) { return std::clamp(v * 2.0f - 1.0f, -1.0f, 1.0f); });
   return out;
