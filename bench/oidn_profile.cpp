@@ -169,7 +169,7 @@ int main(int argc, char** argv) {
   OidnBase base = loaded.oidnControlled ? loaded.oidnControlled->base() : loaded.oidn;
   base->eval();
   base->useChannelsLast();
-  if (bf16) base->useBFloat16();
+  base->useBFloat16(bf16);
   const FrameBuffers buffers = readFrame(frame);
   const double mpix = buffers.width * double(buffers.height) / 1e6;
   if (pipeline) {

@@ -6,7 +6,7 @@ dnmetrics' PSNR (Reinhard v / (1 + v), clipped to [0, 1], peak 1). For
 checking that a speed change keeps the quality: B - A per frame and the mean.
 
   quality_ab.py --bin build/bin --a "--model models/default.dnm" --b "--model ... -q fast"
-                [--b-env NAME=VALUE] [--threads 2] [--keep DIR]
+                [--b-env NAME=VALUE] [--threads 2] [--keep DIR] [--match 000104,cornell]
 """
 import argparse
 import glob
@@ -64,6 +64,7 @@ def main():
     ap.add_argument("--b-env", action="append", default=[], help="NAME=VALUE in B's environment")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--keep", help="folder for the outputs (default: a temporary one)")
+    ap.add_argument("--match", default="", help="only frames whose name holds one of these (comma-separated)")
     args = ap.parse_args()
     envs = [dict(e.split("=", 1) for e in args.a_env), dict(e.split("=", 1) for e in args.b_env)]
     tmp = tempfile.TemporaryDirectory()
@@ -73,6 +74,8 @@ def main():
     print(f"{'frame':<44} {'A dB':>7} {'B dB':>7} {'B-A dB':>7} {'B vs A dB':>9}")
     rows = []
     for name, noisy, ref in frames():
+        if args.match and not any(m in name for m in args.match.split(",")):
+            continue
         slug = name.replace("/", "_")
         a = denoise(args.bin, args.a, envs[0], noisy, os.path.join(work, "a_" + slug), args.threads)
         b = denoise(args.bin, args.b, envs[1], noisy, os.path.join(work, "b_" + slug), args.threads)

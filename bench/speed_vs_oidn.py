@@ -35,8 +35,9 @@ ROOT = os.path.join(HERE, "..")
 EXAMPLE = os.path.join(ROOT, "testdata", "example", "scene000201_4spp.exr")
 OIDN_RUNNER = os.path.join(ROOT, "experiments", "oidn_denoise.py")
 
-DEFAULT_MODES = ("default=;light-paths off=--light-paths off;prefilter off=--prefilter off;"
-                 "control on=--control on")
+DEFAULT_MODES = ("high (default)=;high bf16=--precision bf16;balanced=-q balanced;"
+                 "balanced bf16=-q balanced --precision bf16;fast=-q fast;fast bf16=-q fast --precision bf16;"
+                 "control on=--control on;control on bf16=--control on --precision bf16")
 
 
 def tiled_frame(path, width, height):
@@ -135,14 +136,17 @@ def main():
                   f"{res['sys']:5.1f} s sys {res['rss']:5.2f} GB", flush=True)
 
     print(f"\n{args.size}, medians of {args.rounds} (the machine's load is in every row alike):")
+    print("ratios: wall (cpu) against OIDN's usual call and its prefilter mode; on a busy machine the CPU "
+          "ratio is the steadier one")
     print(f"{'command':<16} {'wall s':>7} {'cpu s':>7} {'sys s':>6} {'peak GB':>7} "
-          f"{'/ OIDN usual':>12} {'/ OIDN prefilter':>16}")
+          f"{'/ OIDN usual':>15} {'/ OIDN prefilter':>17}")
     walls = {n: median([x["wall"] for x in rs]) for n, rs in results.items()}
+    cpus = {n: median([x["user"] + x["sys"] for x in rs]) for n, rs in results.items()}
     for name, rs in results.items():
-        ratios = [f"{walls[name] / walls[o]:.2f}x" if o in walls else "-" for o in ("OIDN usual", "OIDN prefilter")]
-        print(f"{name:<16} {walls[name]:7.1f} {median([x['user'] + x['sys'] for x in rs]):7.1f} "
-              f"{median([x['sys'] for x in rs]):6.1f} {max(x['rss'] for x in rs):7.2f} "
-              f"{ratios[0]:>12} {ratios[1]:>16}")
+        ratios = [f"{walls[name] / walls[o]:.2f}x ({cpus[name] / cpus[o]:.2f}x)" if o in walls else "-"
+                  for o in ("OIDN usual", "OIDN prefilter")]
+        print(f"{name:<16} {walls[name]:7.1f} {cpus[name]:7.1f} {median([x['sys'] for x in rs]):6.1f} "
+              f"{max(x['rss'] for x in rs):7.2f} {ratios[0]:>15} {ratios[1]:>17}")
 
 
 if __name__ == "__main__":
