@@ -61,9 +61,9 @@ quality (the default model, models/default.dnm, and others over OIDN's networks)
   --prefilter on|off  albedo and normal denoised first (on, default: fast turns it off)
   --light-paths on|off  the light-path split where the passes exist (on, default:
                       fast and balanced turn it off)
-  --precision float|bf16  the networks' inner convolutions in float (default:
-                      OIDN's result bit for bit) or bfloat16 (about twice as fast
-                      on CPUs with AMX; within 0.1 dB, docs/dndenoise.md)
+  --precision float|bf16  the convolutions inside the networks in float (default:
+                      OIDN's result) or bfloat16: faster on CPUs with AMX, 0.03 dB
+                      lower on average (docs/dndenoise.md, Speed and memory)
   --control auto|on|off  models with a Control Module (the default): steer the base
                       when it leaves correlated noise (auto, default), always, or never
   --sigmas LIST|none  models with a diffusion Control Module (the default): the

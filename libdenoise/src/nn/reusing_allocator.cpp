@@ -1,5 +1,6 @@
 #include "dn/nn/reusing_allocator.h"
 
+#include <algorithm>
 #include <map>
 #include <mutex>
 
@@ -41,6 +42,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
   void* take(std::size_t bytes) const {
     if (bytes >= kMinCachedBlock) {
       std::lock_guard<std::mutex> lock(mutex_);
+      live_ += bytes;
       auto it = free_.find(bytes);
       if (it != free_.end()) {
         char* block = it->second;
@@ -48,6 +50,10 @@ class ReusingCpuAllocator final : public c10::Allocator {
         cached_ -= bytes;
         return block + kHeader;
       }
+      // A new block: cached ones go first where live and cached blocks would
+      // pass their high-water mark, so that the peak is the one without a cache.
+      while (live_ + cached_ > highWater_ && !free_.empty()) evict();
+      highWater_ = std::max(highWater_, live_ + cached_);
     }
     auto* block = static_cast<char*>(c10::alloc_cpu(bytes + kHeader));
     *reinterpret_cast<std::size_t*>(block) = bytes;
@@ -61,6 +67,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
     ReusingCpuAllocator& self = instance();
     if (bytes >= kMinCachedBlock) {
       std::lock_guard<std::mutex> lock(self.mutex_);
+      self.live_ -= bytes;
       if (self.cached_ + bytes <= self.cap_) {
         self.free_.emplace(bytes, block);
         self.cached_ += bytes;
@@ -70,19 +77,23 @@ class ReusingCpuAllocator final : public c10::Allocator {
     c10::free_cpu(block);
   }
 
+  // Frees the largest cached block.
+  void evict() const {
+    auto last = std::prev(free_.end());
+    cached_ -= last->first;
+    c10::free_cpu(last->second);
+    free_.erase(last);
+  }
   // Frees cached blocks, largest first, until the cache fits the cap.
   void trim() {
-    while (cached_ > cap_ && !free_.empty()) {
-      auto last = std::prev(free_.end());
-      cached_ -= last->first;
-      c10::free_cpu(last->second);
-      free_.erase(last);
-    }
+    while (cached_ > cap_ && !free_.empty()) evict();
   }
 
   mutable std::mutex mutex_;
   mutable std::multimap<std::size_t, char*> free_;  // by size
   mutable std::size_t cached_ = 0;
+  mutable std::size_t live_ = 0;       // bytes of large blocks in use
+  mutable std::size_t highWater_ = 0;  // the most of live_ + cached_ so far
   std::size_t cap_ = 0;
 };
 

@@ -13,8 +13,11 @@ namespace dn {
 
 // Installs the allocator for every later CPU tensor (process-wide; tensors
 // made before keep their own deleter). At most `maxCachedBytes` of freed
-// blocks are kept; a block freed beyond that goes back to the system. Blocks
-// under 1 MiB are left to malloc. Calling it again changes the cap.
+// blocks are kept; a block freed beyond that goes back to the system. A new
+// block that would take the large blocks in use and cached past their
+// high-water mark evicts cached ones first: the peak memory stays what it is
+// without the cache. Blocks under 1 MiB are left to malloc. Calling it again
+// changes the cap.
 void useReusingCpuAllocator(std::size_t maxCachedBytes);
 
 // Bytes of freed blocks held for reuse now.
