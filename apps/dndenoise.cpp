@@ -595,8 +595,8 @@ int run(Options o, int argc, char** argv) {
   const std::optional<tonemap::OcioDisplay> display = displayFor(o, jobs);
   checkFilesBeforeWork(o, jobs, previews);
   // Freed activations are reused, not handed back to the kernel to be zeroed
-  // again: a quarter of the system time (dn/nn/reusing_allocator.h).
-  useReusingCpuAllocator(static_cast<std::size_t>(o.denoise.maxMemoryBytes / 4));
+  // again, within the peak the networks reach anyway (dn/nn/reusing_allocator.h).
+  useReusingCpuAllocator(static_cast<std::size_t>(o.denoise.maxMemoryBytes));
   const auto loadStart = Clock::now();
   Denoiser denoiser = [&] {
     try {
