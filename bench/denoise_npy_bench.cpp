@@ -167,18 +167,20 @@ int run(const Args& args) {
   if (args.threads > 0) at::set_num_threads(args.threads);
   std::vector<torch::Device> devices;
   for (const auto& name : args.devices) devices.push_back(dn::parseDevice(name));
-  for (const auto& device : devices)
-    if (device.is_cuda()) {
-      at::globalContext().setAllowTF32CuDNN(args.tf32);
-      at::globalContext().setAllowTF32CuBLAS(args.tf32);
-    }
+  const bool cuda =
+      std::any_of(devices.begin(), devices.end(), [](auto& d) { return d.is_cuda(); });
+  const char* tf32 = !cuda ? "n/a" : args.tf32 ? "on" : "off";
+  if (cuda) {
+    at::globalContext().setAllowTF32CuDNN(args.tf32);
+    at::globalContext().setAllowTF32CuBLAS(args.tf32);
+  }
   const dn::FrameBuffers frame = readFrame(args.input);
   const dn::Denoiser denoiser = dn::Denoiser::fromFile(args.model);
   if (!args.output.empty()) fs::create_directories(args.output);
   const std::string size = std::to_string(frame.width) + "x" + std::to_string(frame.height);
-  std::printf("%s, %zu buffers, %s, %d thread(s), TF32 %s, median of %d after %d warm-up\n",
-              size.c_str(), frame.buffers.size(), args.model.c_str(), at::get_num_threads(),
-              args.tf32 ? "on" : "off", args.repeats, args.warmup);
+  std::printf("%s, %zu buffers, %s, %d CPU thread(s), TF32 %s, median of %d after %d warm-up\n",
+              size.c_str(), frame.buffers.size(), args.model.c_str(), at::get_num_threads(), tf32,
+              args.repeats, args.warmup);
   std::printf("%-10s %-8s %10s %10s %12s\n", "mode", "device", "median s", "min s", "PSNR vs ref");
 
   for (const auto& mode : args.modes) {
@@ -212,8 +214,8 @@ int run(const Args& args) {
                   best, compared ? std::to_string(psnr).c_str() : "-");
       std::printf(
           "RESULT mode=%s device=%s size=%s tf32=%s threads=%d repeats=%d median_s=%.4f min_s=%.4f",
-          mode.c_str(), device.c_str(), size.c_str(), args.tf32 ? "on" : "off",
-          at::get_num_threads(), args.repeats, median(times), best);
+          mode.c_str(), device.c_str(), size.c_str(), tf32, at::get_num_threads(), args.repeats,
+          median(times), best);
       if (compared) std::printf(" psnr_vs_%s=%.2f", referenceName.c_str(), psnr);
       std::printf("\n");
       std::fflush(stdout);

@@ -35,9 +35,10 @@ int main(int argc, char** argv) {
   try {
     const dn::FrameBuffers frame = dn::readFrame(input);
     if (wanted.empty()) wanted = frame.names();
+    for (const auto& name : wanted)
+      if (!frame.has(name)) throw std::runtime_error(input + ": no " + name + " buffer");
     std::filesystem::create_directories(outDir);
     for (const auto& name : wanted) {
-      if (!frame.has(name)) throw std::runtime_error(input + ": no " + name + " buffer");
       dn::npy::writeImage(outDir + "/" + name + ".npy", frame.get(name), dtype);
       std::printf("%s/%s.npy\n", outDir.c_str(), name.c_str());
     }

@@ -16,7 +16,8 @@
 # 5. times 4K on CUDA, and OIDN 2.5.1's own CUDA device (bench/gpu/oidn_bench.py,
 #    its usual call and its prefilter recipe) at both sizes where carry/oidn exists.
 # Knobs: DN_GPU_REPEATS (5), DN_GPU_SIZES (1920x1080,3840x2160), DN_GPU_CPU_4K=1
-# (also the CPU reference at 4K), DN_GPU_JOBS (nproc), DN_GPU_WORK (/tmp/dn-gpu).
+# (also the CPU reference at 4K), DN_GPU_JOBS (nproc), DN_GPU_WORK (/tmp/dn-gpu),
+# DN_OIDN_LIB (bench/gpu/carry/oidn; e.g. a folder an earlier call left in /tmp).
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 out=${OUT:-/tmp/dn-gpu-out}
@@ -102,14 +103,15 @@ for size in ${sizes//,/ }; do
   done
 done
 
-if [ -f "$carry/oidn/libOpenImageDenoise.so.2" ]; then
+oidn_lib=${DN_OIDN_LIB:-$carry/oidn}
+if [ -f "$oidn_lib/libOpenImageDenoise.so.2" ]; then
   for size in ${sizes//,/ }; do
     step "OIDN 2.5.1 on CUDA at $size"
-    python3 bench/gpu/oidn_bench.py --lib "$carry/oidn" --input "$work/inputs/$size" --device cuda \
+    python3 bench/gpu/oidn_bench.py --lib "$oidn_lib" --input "$work/inputs/$size" --device cuda \
       --repeats "$repeats" 2>&1 | tee -a "$out/bench.log" || fail "OIDN CUDA $size"
   done
 else
-  echo "check_cuda: $carry/oidn missing (prepare_carry.sh --with-oidn): no OIDN CUDA timings" >&2
+  echo "check_cuda: $oidn_lib has no OIDN (prepare_carry.sh --with-oidn): no OIDN CUDA timings" >&2
 fi
 
 step "summary (median seconds; PSNR of CUDA against the CPU in dB, >= 60 wanted with TF32 off)"
