@@ -11,7 +11,8 @@ set(DN_INSTALL_DATADIR ${CMAKE_INSTALL_DATADIR}/${PROJECT_NAME})
 set(DN_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/DiffusionDenoise)
 
 # Library target -> name after the dn:: namespace.
-set(dn_exports dn_tonemap tonemap dn_tonemap_ocio ocio dn_metrics metrics dn_io io dn_data data)
+set(dn_exports dn_tonemap tonemap dn_tonemap_ocio ocio dn_metrics metrics dn_io io dn_data data
+    dn_motion motion)
 if(DN_WITH_TORCH)
   list(APPEND dn_exports dn_core denoise)
 endif()

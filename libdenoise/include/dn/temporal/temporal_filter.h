@@ -1,0 +1,58 @@
+// Filtering denoised frames over time: each frame's result averaged with its
+// neighbours' results brought into it along the motion, where they are trusted.
+// Each frame's leftover error (blotches) changes with the noise seed, so the
+// average of trusted neighbours removes part of it and most of the flicker.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "dn/image.h"
+#include "dn/motion/motion.h"
+#include "dn/motion/reproject.h"
+
+namespace dn::temporal {
+
+// One frame of the window: the denoised result, the noisy render (for the
+// repeated-noise test), its guides and its motion.
+struct WindowFrame {
+  Image denoised;  // 3 channels, linear
+  Image noisy;     // 3 channels, linear
+  motion::Guides guides;
+  motion::MotionField motion;
+};
+
+struct TemporalOptions {
+  int radius = 2;  // neighbours on each side
+  motion::TrustOptions trust;
+  // A neighbour whose reprojected result differs from the frame's (in a
+  // Reinhard space, relative to the render's local noise level) by more than
+  // this many robust spreads of such differences is a moving shadow or
+  // highlight: its weight falls linearly to 0 between colourLow and colourHigh.
+  double colourLow = 1.5;
+  double colourHigh = 3.0;
+  // Noise residuals correlated above this with the frame's: the neighbour
+  // repeats the frame's noise (a fixed seed on a still camera) and adds nothing.
+  double repeatedNoiseCorrelation = 0.5;
+};
+
+// What one frame took from its neighbours, for -v.
+struct TemporalStats {
+  double historyShare = 0.0;    // mean over pixels of the neighbours' share of the weight
+  int neighbours = 0;           // neighbours available in the window
+  int repeatedNoise = 0;        // of them, rejected for repeating the frame's noise
+  std::vector<double> trusted;  // per neighbour: share of pixels it contributed to
+};
+
+struct TemporalResult {
+  Image color;
+  TemporalStats stats;
+};
+
+// The result for window[centre]: `window` holds consecutive frames (nullptr
+// where a frame is missing, which ends the chain on that side), window[centre]
+// the frame itself. Deterministic: depends only on the frames given.
+TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
+                           const TemporalOptions& options = {});
+
+}  // namespace dn::temporal
