@@ -106,7 +106,9 @@ output:
                       blur off; Arnold/Karma motionvector, V-Ray VRayVelocity,
                       RenderMan motionBack/Fore): average each frame's result with
                       its neighbours' where the motion and the features agree
-                      (on, default); off: every frame alone
+                      (on or filter, default); off: every frame alone;
+                      accumulate: average the noisy inputs that way before
+                      denoising (measured worse: moving shadows are averaged in)
   --window N          neighbours on each side for --temporal, 1-8 (default 2)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
@@ -276,8 +278,14 @@ Options parseArgs(int argc, char** argv) {
       o.skipMissing = true;
     } else if (args.flag("--temporal")) {
       const std::string v = args.value("--temporal");
-      if (v != "on" && v != "off") throw cli::UsageError("--temporal must be on or off, got " + v);
-      o.temporal.enabled = v == "on";
+      const std::map<std::string, cli::TemporalMode> modes = {
+          {"on", cli::TemporalMode::Filter},
+          {"filter", cli::TemporalMode::Filter},
+          {"accumulate", cli::TemporalMode::Accumulate}};
+      if (v != "off" && !modes.count(v))
+        throw cli::UsageError("--temporal must be on, off, filter or accumulate, got " + v);
+      o.temporal.enabled = v != "off";
+      if (o.temporal.enabled) o.temporal.mode = modes.at(v);
     } else if (args.flag("--window")) {
       o.temporal.radius = args.intValue("--window", 1, 8);
     } else if (args.flag("--motion")) {
@@ -602,7 +610,9 @@ int run(Options o, int argc, char** argv) {
               ? temporal->denoise(
                     input, frame,
                     [&](const std::string& path) { return readInput(o, denoiser, path, path); },
-                    [&](const FrameBuffers& f) { return denoiser.denoise(f, options); })
+                    [&](const std::string&, const FrameBuffers& f) {
+                      return denoiser.denoise(f, options);
+                    })
               : denoiser.denoise(frame, options);
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }

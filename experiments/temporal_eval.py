@@ -3,20 +3,24 @@
 
   python3 experiments/temporal_eval.py --data /work/data/temporal --out /work/data/temporal/eval \
       --dndenoise build/bin/dndenoise --dnmetrics build/bin/dnmetrics \
-      --scenes still object pan light --spp 4 16 [--window 2] [--threads 2]
+      --refilter build/bin/temporal_refilter --model models/default.dnm \
+      --scenes still object pan light --spp 4 16 [--window 2] [--threads 2] \
+      [--extra accumulate on]
 
 For each scene folder (experiments/render_sequences.py: spp<N>.<frame>.exr, and
-ref.<frame>.exr or one ref.exr for a locked-off shot) and each --spp, denoises
-the sequence four ways:
-  fbf       dndenoise --temporal off (the default model, every frame alone)
-  temporal  dndenoise --temporal on --window W
-  oidn      OIDN 2.x per frame, its usual call (experiments/oidn_denoise.py)
-  prefilter OIDN's prefilter mode per frame (oidn_denoise.py --prefilter)
+ref.<frame>.exr or one ref.exr for a locked-off shot; at most 8 frames) and
+each --spp, denoises the sequence these ways:
+  fbf        dndenoise --temporal off --float (the default model, every frame alone)
+  temporal   the temporal filter of dndenoise --temporal on over the fbf frames
+             (bench/temporal_refilter: the same code, without denoising again)
+  oidn       OIDN 2.x per frame, its usual call (experiments/oidn_denoise.py)
+  prefilter  OIDN's prefilter mode per frame (oidn_denoise.py --prefilter)
+  --extra M  dndenoise --temporal M --float in full (on: to check that it writes
+             what temporal_refilter gives, and its time against fbf's)
 and scores each with dnmetrics (PSNR, FLIP per frame, flicker of the error).
-Prints a Markdown table (means over frames; the worst per-frame PSNR change of
-temporal against fbf; wall time of the two dndenoise runs, measured back to
-back in this process) and writes OUT/results.json. Existing outputs are reused
-unless --force.
+Prints a Markdown table (means over frames; the worst per-frame PSNR change
+against fbf; wall time of the dndenoise runs) and writes OUT/results.json.
+Existing outputs are reused unless --force.
 """
 
 import argparse
@@ -44,32 +48,35 @@ def run(cmd, log=None):
 
 
 def frames_of(folder, spp):
-    return sorted(glob.glob(os.path.join(folder, f"spp{spp}.[0-9][0-9][0-9][0-9].exr")))
+    return sorted(glob.glob(os.path.join(folder, f"spp{spp}.[0-9][0-9][0-9][0-9].exr")))[:8]
 
 
 def denoise(args, scene, spp, method, out):
     folder = os.path.join(args.data, scene)
     pattern = os.path.join(folder, f"spp{spp}.#.exr")
+    frames = frames_of(folder, spp)
+    last = int(frames[-1][-8:-4])
     target = os.path.join(out, method)
     os.makedirs(target, exist_ok=True)
     done = glob.glob(os.path.join(target, "*.exr"))
-    if done and not args.force and len(done) == len(frames_of(folder, spp)):
+    threads = ["--threads", str(args.threads)] if args.threads else []
+    if method == "temporal":  # always: it is quick, and its settings are what is measured
+        cmd = [args.refilter, pattern, os.path.join(out, "fbf", f"spp{spp}.#.exr"), "-o",
+               os.path.join(target, f"spp{spp}.#.exr"), "--window", str(args.window),
+               "--frames", f"1-{last}"]
+        if args.colour:
+            cmd += ["--colour", args.colour]
+        return run(cmd, log=os.path.join(out, method + ".log"))[0]
+    if done and not args.force and len(done) == len(frames):
         return None
-    if method in ("fbf", "temporal"):
-        cmd = [args.dndenoise, pattern, "-o", os.path.join(target, f"spp{spp}.#.exr"),
-               "--rgb-only", "--temporal", "off" if method == "fbf" else "on", "-v"]
-        if method == "temporal":
-            cmd += ["--window", str(args.window)]
-        if args.threads:
-            cmd += ["--threads", str(args.threads)]
-        seconds, _ = run(cmd, log=os.path.join(out, method + ".log"))
-        return seconds
-    cmd = [sys.executable, os.path.join(HERE, "oidn_denoise.py"), *frames_of(folder, spp), "-o", target + "/"]
-    if args.threads:
-        cmd += ["--threads", str(args.threads)]
-    if method == "prefilter":
-        cmd.append("--prefilter")
-    return run(cmd)[0]
+    if method in ("oidn", "prefilter"):
+        cmd = [sys.executable, os.path.join(HERE, "oidn_denoise.py"), *frames, "-o", target + "/"] + threads
+        return run(cmd + (["--prefilter"] if method == "prefilter" else []))[0]
+    mode = "off" if method == "fbf" else method
+    cmd = [args.dndenoise, "--model", args.model, pattern, "-o", os.path.join(target, f"spp{spp}.#.exr"),
+           "--rgb-only", "--float", "--temporal", mode, "--window", str(args.window), "-v",
+           "--frames", f"1-{last}"] + threads
+    return run(cmd, log=os.path.join(out, method + ".log"))[0]
 
 
 def score(args, scene, spp, method, out):
@@ -98,6 +105,10 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--dndenoise", required=True)
     ap.add_argument("--dnmetrics", required=True)
+    ap.add_argument("--refilter", required=True, help="bench/temporal_refilter")
+    ap.add_argument("--model", required=True)
+    ap.add_argument("--colour", default="", help="LOW,HIGH: the colour test's thresholds")
+    ap.add_argument("--extra", nargs="*", default=[], choices=["on", "accumulate"])
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
     ap.add_argument("--window", type=int, default=2)
@@ -112,19 +123,21 @@ def main():
         for spp in args.spp:
             out = os.path.join(args.out, scene, f"spp{spp}")
             os.makedirs(out, exist_ok=True)
-            times = {m: denoise(args, scene, spp, m, out) for m in METHODS}
-            scores = {m: score(args, scene, spp, m, out) for m in METHODS}
-            worst = min(t - f for t, f in zip(scores["temporal"]["psnr"], scores["fbf"]["psnr"]))
-            shares = history_shares(os.path.join(out, "temporal.log"))
+            methods = list(METHODS) + args.extra
+            times = {m: denoise(args, scene, spp, m, out) for m in methods}
+            scores = {m: score(args, scene, spp, m, out) for m in methods}
+            worst = {m: min(t - f for t, f in zip(scores[m]["psnr"], scores["fbf"]["psnr"])) for m in methods}
+            shares = {m: history_shares(os.path.join(out, m + ".log")) for m in methods
+                      if m not in ("fbf", "oidn", "prefilter")}
             results[f"{scene}/spp{spp}"] = {"scores": scores, "seconds": times,
                                            "worst_frame_delta_db": worst, "history_percent": shares}
-            for m in METHODS:
+            for m in methods:
                 s = scores[m]
                 note = ""
-                if m == "temporal":
-                    note = f"worst frame {worst:+.2f} dB vs fbf; {mean(shares):.0f}% from history"
-                    if times["fbf"] and times["temporal"]:
-                        note += f"; time x{times['temporal'] / times['fbf']:.2f} of fbf"
+                if m in shares:
+                    note = f"worst frame {worst[m]:+.2f} dB vs fbf; {mean(shares[m]):.0f}% from history"
+                    if times.get("fbf") and times.get(m) and m != "temporal":
+                        note += f"; time x{times[m] / times['fbf']:.2f} of fbf"
                 print(f"| {scene} | {spp} | {m} | {mean(s['psnr']):.2f} | {mean(s['flip']):.4f} | "
                       f"{mean(s['flicker']):.5f} | {note} |", flush=True)
     with open(os.path.join(args.out, "results.json"), "w") as f:

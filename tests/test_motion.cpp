@@ -309,3 +309,25 @@ TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") 
     for (int x = 0; x < 12; ++x) result += r.color.at(x, y, 1), light += truth.color.at(x, y, 1);
   CHECK(result / light > 0.95);
 }
+
+TEST_CASE("accumulating inputs: independent noise averages down, every buffer alike") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames;
+  std::vector<FrameBuffers> inputs(3);
+  for (unsigned t = 0; t < 3; ++t) {
+    frames.push_back(stillFrame(truth, 500 + t, 600 + t));
+    inputs[t].width = 32, inputs[t].height = 24;
+    inputs[t].buffers["color"] = frames[t].noisy;
+    inputs[t].buffers["albedo"] = truth.albedo;
+  }
+  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  std::vector<const FrameBuffers*> buffers = {&inputs[0], &inputs[1], &inputs[2]};
+  temporal::TemporalStats stats;
+  const FrameBuffers out = temporal::accumulateInputs(buffers, window, 1, {}, stats);
+  CHECK(stats.neighbours == 2);
+  CHECK(stats.historyShare == doctest::Approx(2.0 / 3.0));
+  // Three independent noises: a third of the variance.
+  CHECK(meanSquaredError(out.get("color"), truth.color) ==
+        doctest::Approx(meanSquaredError(frames[1].noisy, truth.color) / 3).epsilon(0.2));
+  CHECK(out.get("albedo").pixels == truth.albedo.pixels);
+}

@@ -15,15 +15,6 @@ namespace fs = std::filesystem;
 
 namespace dn::cli {
 
-struct TemporalSequence::Entry {
-  DenoiseResult result;  // the frame denoised alone
-  temporal::WindowFrame frame;
-};
-
-namespace {
-
-// The frame number of `path` in `pattern` ("shot.#.exr", "shot.%04d.exr"), or
-// nullopt when it is not one of its frames.
 std::optional<int> frameNumberOf(const std::string& pattern, const std::string& path) {
   std::string printf, range;
   if (!OIIO::Filesystem::parse_pattern(pattern.c_str(), 0, printf, range)) return std::nullopt;
@@ -41,6 +32,14 @@ std::optional<int> frameNumberOf(const std::string& pattern, const std::string& 
   if (frameFile(pattern, static_cast<int>(n)) != path) return std::nullopt;
   return static_cast<int>(n);
 }
+
+// A frame as read: the buffers the model reads, and its guides and motion.
+struct TemporalSequence::Input {
+  FrameBuffers buffers;
+  temporal::WindowFrame frame;  // noisy, guides, motion (denoised filled per use)
+};
+
+namespace {
 
 // The albedo, normal and depth of a frame file: the guides of reprojection.
 motion::Guides readGuides(const std::string& path, const ReadOptions& base) {
@@ -94,17 +93,15 @@ std::string TemporalSequence::fileOf(int number) const {
   return fs::exists(path, ec) ? path : std::string();
 }
 
-std::shared_ptr<const TemporalSequence::Entry> TemporalSequence::load(int number,
-                                                                      const FrameBuffers* given,
-                                                                      const Read& read,
-                                                                      const Denoise& denoise) {
-  if (auto it = window_.find(number); it != window_.end()) return it->second;
+std::shared_ptr<const TemporalSequence::Input> TemporalSequence::input(int number,
+                                                                       const FrameBuffers* given,
+                                                                       const Read& read) {
+  if (auto it = inputs_.find(number); it != inputs_.end()) return it->second;
   const std::string path = fileOf(number);
   if (path.empty()) return nullptr;
-  const FrameBuffers frame = given ? *given : read(path);
-  auto entry = std::make_shared<Entry>();
-  entry->result = denoise(frame);
-  entry->frame.denoised = entry->result.color;
+  auto entry = std::make_shared<Input>();
+  entry->buffers = given ? *given : read(path);
+  const FrameBuffers& frame = entry->buffers;
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = readGuides(path, settings_.read);
   std::optional<motion::MotionField> field =
@@ -113,31 +110,80 @@ std::shared_ptr<const TemporalSequence::Entry> TemporalSequence::load(int number
           : motion::readMotion(frameFile(settings_.motion, number), frame.width, frame.height, "",
                                true);
   if (field) entry->frame.motion = std::move(*field);
-  window_[number] = entry;
+  inputs_[number] = entry;
   return entry;
+}
+
+std::shared_ptr<const DenoiseResult> TemporalSequence::estimate(int number,
+                                                                const FrameBuffers* given,
+                                                                const Read& read,
+                                                                const Denoise& denoise) {
+  if (auto it = estimates_.find(number); it != estimates_.end()) return it->second;
+  auto self = input(number, given, read);
+  if (!self) return nullptr;
+  if (settings_.mode == TemporalMode::Filter)
+    return estimates_[number] =
+               std::make_shared<DenoiseResult>(denoise(fileOf(number), self->buffers));
+  const int radius = settings_.radius;
+  std::vector<std::shared_ptr<const Input>> held;
+  std::vector<const FrameBuffers*> buffers;
+  std::vector<const temporal::WindowFrame*> window;
+  for (int m = number - radius; m <= number + radius; ++m) {
+    auto entry = m == number ? self : input(m, nullptr, read);
+    const bool usable = entry && entry->buffers.width == self->buffers.width &&
+                        entry->buffers.height == self->buffers.height;
+    held.push_back(entry);
+    buffers.push_back(usable ? &entry->buffers : nullptr);
+    window.push_back(usable ? &entry->frame : nullptr);
+  }
+  temporal::TemporalOptions options = settings_.filter;
+  options.radius = radius;
+  temporal::TemporalStats stats;
+  const FrameBuffers accumulated =
+      temporal::accumulateInputs(buffers, window, radius, options, stats);
+  lastStats_ = stats;
+  return estimates_[number] = std::make_shared<DenoiseResult>(denoise(fileOf(number), accumulated));
+}
+
+void TemporalSequence::forget(int number) {
+  // Memory stays bounded by the window: what lies behind it is dropped.
+  const int reach = settings_.radius;
+  for (auto it = inputs_.begin(); it != inputs_.end();)
+    it = (it->first < number - reach || it->first > number + reach) ? inputs_.erase(it)
+                                                                    : std::next(it);
+  for (auto it = estimates_.begin(); it != estimates_.end();)
+    it = (it->first < number - settings_.radius || it->first > number + settings_.radius)
+             ? estimates_.erase(it)
+             : std::next(it);
 }
 
 DenoiseResult TemporalSequence::denoise(const std::string& input, const FrameBuffers& frame,
                                         const Read& read, const Denoise& denoise) {
   const int n = numbers_.at(input);
   const int radius = settings_.radius;
-  // Memory stays bounded by the window: frames behind it are dropped.
-  for (auto it = window_.begin(); it != window_.end();)
-    it = (it->first < n - radius || it->first > n + radius) ? window_.erase(it) : std::next(it);
-  std::vector<std::shared_ptr<const Entry>> held;
+  forget(n);
+  lastNumber_ = n;
+  if (settings_.mode == TemporalMode::Accumulate) return *estimate(n, &frame, read, denoise);
+  std::vector<std::shared_ptr<const DenoiseResult>> held;
+  std::vector<temporal::WindowFrame> frames(2 * radius + 1);
   std::vector<const temporal::WindowFrame*> window;
   for (int m = n - radius; m <= n + radius; ++m) {
-    auto entry = load(m, m == n ? &frame : nullptr, read, denoise);
-    const bool usable = entry && entry->frame.denoised.sameShape(frame.get("color"));
-    held.push_back(entry);
-    window.push_back(usable ? &entry->frame : nullptr);
+    auto result = estimate(m, m == n ? &frame : nullptr, read, denoise);
+    auto source = result ? this->input(m, nullptr, read) : nullptr;
+    const bool usable = result && result->color.sameShape(frame.get("color"));
+    held.push_back(result);
+    if (usable) {
+      temporal::WindowFrame& f = frames[m - (n - radius)];
+      f = source->frame;
+      f.denoised = result->color;
+    }
+    window.push_back(usable ? &frames[m - (n - radius)] : nullptr);
   }
-  temporal::TemporalOptions options;
+  temporal::TemporalOptions options = settings_.filter;
   options.radius = radius;
   temporal::TemporalResult filtered = temporal::filterFrame(window, radius, options);
   lastStats_ = filtered.stats;
-  lastNumber_ = n;
-  DenoiseResult result = held[radius]->result;
+  DenoiseResult result = *held[radius];
   result.color = std::move(filtered.color);
   return result;
 }

@@ -8,6 +8,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -17,17 +18,28 @@
 
 namespace dn::cli {
 
+// How history and frame are combined (--temporal): filter the frames denoised
+// alone (the default), or accumulate the noisy inputs before denoising (which
+// averages moving shadows in: measured worse, docs/RESULTS.md).
+enum class TemporalMode { Filter, Accumulate };
+
 struct TemporalSettings {
   bool enabled = true;  // --temporal on|off
-  int radius = 2;       // --window N: neighbours on each side
-  std::string motion;   // --motion FILE or PATTERN: separate motion files
-  ReadOptions read;     // the view layer and channel overrides
+  TemporalMode mode = TemporalMode::Filter;
+  int radius = 2;                    // --window N: neighbours on each side
+  std::string motion;                // --motion FILE or PATTERN: separate motion files
+  ReadOptions read;                  // the view layer and channel overrides
+  temporal::TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
 };
+
+// The frame number of `path` in `pattern` ("shot.#.exr"), or nullopt.
+std::optional<int> frameNumberOf(const std::string& pattern, const std::string& path);
 
 class TemporalSequence {
  public:
   using Read = std::function<FrameBuffers(const std::string& path)>;
-  using Denoise = std::function<DenoiseResult(const FrameBuffers& frame)>;
+  // Denoises `frame`, which is the frame of file `path` (or its accumulated input).
+  using Denoise = std::function<DenoiseResult(const std::string& path, const FrameBuffers& frame)>;
 
   // The temporal plan for `inputs` (the tool's input arguments) whose frames
   // are `jobInputs`, or nullptr: turned off, not one sequence, or no motion
@@ -46,17 +58,21 @@ class TemporalSequence {
   std::string report() const;
 
  private:
-  struct Entry;
+  struct Input;
   TemporalSequence(std::string pattern, std::map<std::string, int> numbers,
                    TemporalSettings settings);
-  std::shared_ptr<const Entry> load(int number, const FrameBuffers* given, const Read& read,
-                                    const Denoise& denoise);
+  std::shared_ptr<const Input> input(int number, const FrameBuffers* given, const Read& read);
+  // A frame's own estimate: denoised alone, or its accumulated input denoised.
+  std::shared_ptr<const DenoiseResult> estimate(int number, const FrameBuffers* given,
+                                                const Read& read, const Denoise& denoise);
   std::string fileOf(int number) const;
+  void forget(int number);
 
   std::string pattern_;
   std::map<std::string, int> numbers_;  // input file -> frame number
   TemporalSettings settings_;
-  std::map<int, std::shared_ptr<const Entry>> window_;
+  std::map<int, std::shared_ptr<const Input>> inputs_;
+  std::map<int, std::shared_ptr<const DenoiseResult>> estimates_;
   temporal::TemporalStats lastStats_;
   int lastNumber_ = 0;
 };

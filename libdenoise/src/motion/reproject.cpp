@@ -111,7 +111,10 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
       std::fill(sum.begin(), sum.end(), 0.0);
       for (int t = 0; t < 4; ++t) {
         const int tx = x0 + (t & 1), ty = y0 + (t >> 1);
-        const double w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
+        const double bilinear = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
+        const bool closest =
+            tx == static_cast<int>(std::lround(qx)) && ty == static_cast<int>(std::lround(qy));
+        const double w = options.nearest ? (closest ? 1.0 : 0.0) : bilinear;
         if (w <= 0.0 || tx < 0 || ty < 0 || tx >= width || ty >= height) continue;
         const std::size_t tap = static_cast<std::size_t>(ty) * width + tx;
         if (!sameSurface(sourceGuides, tap, currentGuides, here, options)) continue;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <stdexcept>
 
 namespace dn::temporal {
@@ -172,6 +173,66 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   }
   result.stats.historyShare = share / std::max<std::size_t>(1, weight.size());
   return result;
+}
+
+FrameBuffers accumulateInputs(const std::vector<const FrameBuffers*>& inputs,
+                              const std::vector<const WindowFrame*>& window, std::size_t centre,
+                              const TemporalOptions& options, TemporalStats& stats) {
+  if (centre >= window.size() || !window[centre] || !inputs[centre])
+    throw std::invalid_argument("accumulateInputs: the centre frame is missing");
+  const WindowFrame& current = *window[centre];
+  FrameBuffers out = *inputs[centre];
+  std::map<std::string, std::vector<double>> sums;
+  for (const auto& [name, image] : out.buffers)
+    if (name != "depth") sums[name].assign(image.pixels.begin(), image.pixels.end());
+  std::vector<double> weight(out.width * static_cast<std::size_t>(out.height), 1.0);
+  motion::TrustOptions trust = options.trust;
+  trust.nearest = true;
+  stats = TemporalStats{};
+  for (int side : {-1, 1}) {
+    std::vector<motion::FrameGeometry> chain = {geometryOf(current)};
+    for (int k = 1; k <= options.radius; ++k) {
+      const long index = static_cast<long>(centre) + side * k;
+      if (index < 0 || index >= static_cast<long>(window.size()) || !window[index] ||
+          !inputs[index])
+        break;
+      const WindowFrame& neighbour = *window[index];
+      if (neighbour.motion.empty() || current.motion.empty()) break;
+      const bool sameBuffers = std::all_of(sums.begin(), sums.end(), [&](const auto& entry) {
+        return inputs[index]->has(entry.first) &&
+               inputs[index]->get(entry.first).sameShape(out.get(entry.first));
+      });
+      if (!sameBuffers) break;
+      chain.push_back(geometryOf(neighbour));
+      ++stats.neighbours;
+      const Image positions = motion::chainPositions(chain, side > 0, trust);
+      Image trusted;
+      for (auto& [name, sum] : sums) {
+        const motion::Reprojected moved = motion::reproject(
+            inputs[index]->get(name), neighbour.guides, positions, current.guides, trust);
+        const int channels = moved.image.channels;
+        for (std::size_t i = 0; i < weight.size(); ++i)
+          for (int c = 0; c < channels; ++c)
+            sum[i * channels + c] += moved.trust.pixels[i] * moved.image.pixels[i * channels + c];
+        if (trusted.empty()) trusted = moved.trust;
+      }
+      std::size_t used = 0;
+      for (std::size_t i = 0; i < weight.size(); ++i)
+        weight[i] += trusted.pixels[i], used += trusted.pixels[i] > 0.0f;
+      stats.trusted.push_back(double(used) / weight.size());
+    }
+  }
+  double share = 0.0;
+  for (auto& [name, sum] : sums) {
+    Image& image = out.buffers[name];
+    for (std::size_t i = 0; i < weight.size(); ++i)
+      for (int c = 0; c < image.channels; ++c)
+        image.pixels[i * image.channels + c] =
+            static_cast<float>(sum[i * image.channels + c] / weight[i]);
+  }
+  for (double w : weight) share += 1.0 - 1.0 / w;
+  stats.historyShare = share / std::max<std::size_t>(1, weight.size());
+  return out;
 }
 
 }  // namespace dn::temporal

@@ -25,6 +25,9 @@ struct TrustOptions {
   double albedoRelative = 0.25;
   double roundTripPixels = 1.0;  // the neighbour's motion back must land within this
   double minCoverage = 0.5;      // least bilinear weight of the accepted taps
+  // The nearest pixel only (trust 0 or 1): noisy samples keep their noise
+  // independent, which a bilinear blend would correlate.
+  bool nearest = false;
 };
 
 // One frame as reprojection sees it: its guides and its motion.

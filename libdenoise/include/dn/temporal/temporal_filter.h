@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "dn/image.h"
+#include "dn/io/buffers.h"
 #include "dn/motion/motion.h"
 #include "dn/motion/reproject.h"
 
@@ -54,5 +55,14 @@ struct TemporalResult {
 // the frame itself. Deterministic: depends only on the frames given.
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
                            const TemporalOptions& options = {});
+
+// Accumulation before denoising (the other candidate): every buffer of
+// inputs[centre] averaged with the neighbours' (nearest pixel, so the noise
+// stays independent; trusted by the screen, round-trip and guide checks; no
+// colour test, the inputs being noisy). `window` gives each frame's guides and
+// motion (denoised may be empty). stats.historyShare as for filterFrame.
+FrameBuffers accumulateInputs(const std::vector<const FrameBuffers*>& inputs,
+                              const std::vector<const WindowFrame*>& window, std::size_t centre,
+                              const TemporalOptions& options, TemporalStats& stats);
 
 }  // namespace dn::temporal
