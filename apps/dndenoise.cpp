@@ -104,12 +104,12 @@ output:
   --skip-missing      denoise the frames that exist, after naming the missing ones
   --temporal on|off   sequences with motion vectors (Blender's Vector pass, motion
                       blur off; Arnold/Karma motionvector, V-Ray VRayVelocity,
-                      RenderMan motionBack/Fore): average each frame's result with
-                      its neighbours' where the motion and the features agree
-                      (on or filter, default); off: every frame alone;
-                      accumulate: average the noisy inputs that way before
-                      denoising (measured worse: moving shadows are averaged in)
-  --window N          neighbours on each side for --temporal, 1-8 (default 2)
+                      RenderMan motionBack/Fore): on (or filter) averages each
+                      frame's result with its neighbours' where the motion, the
+                      features and the light agree; off (default for now): every
+                      frame alone; accumulate: average the noisy inputs that way
+                      before denoising (measured worse: moving shadows averaged in)
+  --window N          neighbours on each side for --temporal, 1-8 (default 4)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)

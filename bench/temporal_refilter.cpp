@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
     std::vector<std::string> positional;
     std::string output, frames;
     cli::TemporalSettings settings;
+    settings.enabled = true;
     while (!args.done()) {
       if (args.flag("-o")) {
         output = args.value("-o");

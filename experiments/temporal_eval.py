@@ -4,7 +4,7 @@
   python3 experiments/temporal_eval.py --data /work/data/temporal --out /work/data/temporal/eval \
       --dndenoise build/bin/dndenoise --dnmetrics build/bin/dnmetrics \
       --refilter build/bin/temporal_refilter --model models/default.dnm \
-      --scenes still object pan light --spp 4 16 [--window 2] [--threads 2] \
+      --scenes still object pan light --spp 4 16 [--window 4] [--threads 2] \
       [--extra accumulate on]
 
 For each scene folder (experiments/render_sequences.py: spp<N>.<frame>.exr, and
@@ -111,7 +111,7 @@ def main():
     ap.add_argument("--extra", nargs="*", default=[], choices=["on", "accumulate"])
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
-    ap.add_argument("--window", type=int, default=2)
+    ap.add_argument("--window", type=int, default=4)
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args()

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """dndenoise on a sequence with motion vectors (testdata/sequence, made by
-experiments/render_sequences.py --scene object): the neighbours are used by
-default, -v says per frame how much came from history, a frame's result does
+experiments/render_sequences.py --scene object): with --temporal on the
+neighbours are used (off by default for now), -v says per frame how much came from history, a frame's result does
 not depend on how the shot was split into runs (bit-identical pixels), and a
 sequence without motion vectors is denoised frame by frame with one line
 saying so. Also dnmetrics on the sequences (per-frame rows, flicker).
@@ -50,7 +50,7 @@ def main():
     shot = os.path.join(args.testdata, "sequence", "spp4.#.exr")
     # The sequence logic, not the model, is under test: the base network alone keeps it fast.
     fast = ["--prefilter", "off", "--light-paths", "off", "--threads", "2"]
-    base = [args.dndenoise, shot, "--rgb-only", "--window", "2"] + fast
+    base = [args.dndenoise, shot, "--rgb-only", "--temporal", "on", "--window", "2"] + fast
 
     whole = run(base + ["-o", os.path.join(work, "whole.#.exr"), "-v"])
     lines = [l for l in whole.stderr.splitlines() if "from history" in l]
@@ -64,17 +64,22 @@ def main():
                               read_rgb(os.path.join(work, f"split.{n:04d}.exr"))) for n in FRAMES)
     check(same, "frames 1-3 and 4-6 in two runs are bit-identical to 1-6 in one run")
 
-    run(base + ["-o", os.path.join(work, "alone.#.exr"), "--temporal", "off"])
+    # Off by default for now (docs/RESULTS.md): the same bits as --temporal off.
+    run([args.dndenoise, shot, "--rgb-only", "-o", os.path.join(work, "alone.#.exr")] + fast)
+    run(base + ["-o", os.path.join(work, "off.#.exr"), "--temporal", "off"])
     differ = [not np.array_equal(read_rgb(os.path.join(work, f"whole.{n:04d}.exr")),
                                  read_rgb(os.path.join(work, f"alone.{n:04d}.exr"))) for n in FRAMES]
-    check(all(differ), "--temporal off gives other results (each frame alone)")
+    check(all(differ), "--temporal on gives other results than each frame alone")
+    check(all(np.array_equal(read_rgb(os.path.join(work, f"off.{n:04d}.exr")),
+                             read_rgb(os.path.join(work, f"alone.{n:04d}.exr"))) for n in FRAMES),
+          "the default is frame by frame (= --temporal off)")
 
     # No motion vectors: one line, frame by frame, the same pixels as --temporal off.
     still = os.path.join(args.testdata, "renderers", "blender5_hdri_4spp.exr")
     for n in (1, 2):
         shutil.copy(still, os.path.join(work, f"novec.{n:04d}.exr"))
     plain = run([args.dndenoise, os.path.join(work, "novec.#.exr"), "-o",
-                 os.path.join(work, "novec_out.#.exr"), "--rgb-only"] + fast)
+                 os.path.join(work, "novec_out.#.exr"), "--rgb-only", "--temporal", "on"] + fast)
     notes = [l for l in plain.stderr.splitlines() if "frame by frame" in l]
     check(len(notes) == 1 and "no motion vectors" in notes[0], "no motion vectors: one line, frame by frame")
 

@@ -1,6 +1,7 @@
 #include "dn/temporal/temporal_filter.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <stdexcept>
@@ -97,6 +98,50 @@ std::vector<float> localNoise(const Image& residual, int r) {
   return out;
 }
 
+// Per pixel, how many standard errors the neighbour's noisy render (brought to
+// the nearest pixel, so its noise stays independent) differs from the frame's,
+// both averaged over a (2r+1)^2 box of trusted pixels: a change of light that
+// the noise cannot explain, at a scale set by the renders alone.
+std::vector<float> lightChange(const Image& current, const Image& moved, const Image& trust,
+                               const Image& currentResidual, const Image& movedResidual, int r) {
+  const int w = current.width, h = current.height, channels = current.channels;
+  // Integral images of: count, difference, and the two residuals' squares.
+  std::vector<std::array<double, 3>> integral(static_cast<std::size_t>(w + 1) * (h + 1));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      std::array<double, 3> v = {0.0, 0.0, 0.0};
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      if (trust.pixels[i] > 0.0f) {
+        v[0] = 1.0;
+        for (int c = 0; c < channels; ++c) {
+          v[1] += (moved.pixels[i * channels + c] - current.pixels[i * channels + c]) / channels;
+          v[2] += (std::pow(currentResidual.pixels[i * channels + c], 2) +
+                   std::pow(movedResidual.pixels[i * channels + c], 2)) /
+                  (channels * channels);
+        }
+      }
+      auto& out = integral[(y + 1) * (w + 1) + x + 1];
+      const auto& up = integral[y * (w + 1) + x + 1];
+      const auto& left = integral[(y + 1) * (w + 1) + x];
+      const auto& corner = integral[y * (w + 1) + x];
+      for (int k = 0; k < 3; ++k) out[k] = v[k] + up[k] + left[k] - corner[k];
+    }
+  std::vector<float> z(current.pixelCount(), 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int x0 = std::max(0, x - r), x1 = std::min(w, x + r + 1);
+      const int y0 = std::max(0, y - r), y1 = std::min(h, y + r + 1);
+      std::array<double, 3> box;
+      for (int k = 0; k < 3; ++k)
+        box[k] = integral[y1 * (w + 1) + x1][k] - integral[y0 * (w + 1) + x1][k] -
+                 integral[y1 * (w + 1) + x0][k] + integral[y0 * (w + 1) + x0][k];
+      if (box[0] < 1.0 || box[2] <= 0.0) continue;
+      // The mean of n differences has variance sum(var) / n^2.
+      z[y * w + x] = static_cast<float>(std::abs(box[1] / box[0]) / (std::sqrt(box[2]) / box[0]));
+    }
+  return z;
+}
+
 motion::FrameGeometry geometryOf(const WindowFrame& frame) {
   return {&frame.guides, &frame.motion};
 }
@@ -139,6 +184,10 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
       const Image residual = motion::reprojectNearest(
           difference(tonemapped(neighbour.noisy, scale), tonemapped(neighbour.denoised, scale)),
           positions);
+      const std::vector<float> changed =
+          lightChange(tonemapped(current.noisy, scale),
+                      motion::reprojectNearest(tonemapped(neighbour.noisy, scale), positions),
+                      moved.trust, baseResidual, residual, options.lightBox);
       if (correlation(baseResidual, residual, moved.trust) > options.repeatedNoiseCorrelation) {
         ++result.stats.repeatedNoise;
         result.stats.trusted.push_back(0.0);
@@ -146,7 +195,9 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
       }
       std::vector<float> d = absoluteDifference(tonemapped(moved.image, scale), baseMapped);
       for (std::size_t i = 0; i < d.size(); ++i) d[i] /= noiseLevel[i];
-      const double spread = robustSpread(d, moved.trust);
+      // Where the light changed over the whole frame (a moving lamp), the
+      // differences' own spread is large too: the cap keeps them rejected.
+      const double spread = std::min(robustSpread(d, moved.trust), options.maxSpread);
       std::size_t used = 0;
       for (std::size_t i = 0; i < d.size(); ++i) {
         double w = moved.trust.pixels[i];
@@ -156,6 +207,8 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
           w *= std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0,
                           1.0);
         }
+        w *= std::clamp((options.lightHigh - changed[i]) / (options.lightHigh - options.lightLow),
+                        0.0, 1.0);
         if (w <= 0.0) continue;
         ++used;
         weight[i] += w;

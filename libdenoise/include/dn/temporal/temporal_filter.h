@@ -24,14 +24,24 @@ struct WindowFrame {
 };
 
 struct TemporalOptions {
-  int radius = 2;  // neighbours on each side
+  int radius = 4;  // neighbours on each side
   motion::TrustOptions trust;
   // A neighbour whose reprojected result differs from the frame's (in a
   // Reinhard space, relative to the render's local noise level) by more than
   // this many robust spreads of such differences is a moving shadow or
   // highlight: its weight falls linearly to 0 between colourLow and colourHigh.
-  double colourLow = 1.5;
-  double colourHigh = 3.0;
+  double colourLow = 2.5;
+  double colourHigh = 5.0;
+  // The spread is at most this: on the locked-off and moving-camera shots of
+  // experiments/render_sequences.py it is 0.16-0.20 at 4 spp and 0.21-0.26 at
+  // 16 spp; a lamp moving across the room raises it to 1-7.
+  double maxSpread = 0.3;
+  // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
+  // must agree within their standard error: the weight falls from 1 at
+  // lightLow standard errors to 0 at lightHigh (a change of light).
+  int lightBox = 5;
+  double lightLow = 2.0;
+  double lightHigh = 4.0;
   // Noise residuals correlated above this with the frame's: the neighbour
   // repeats the frame's noise (a fixed seed on a still camera) and adds nothing.
   double repeatedNoiseCorrelation = 0.5;
