@@ -35,8 +35,8 @@ ROOT = os.path.join(HERE, "..")
 EXAMPLE = os.path.join(ROOT, "testdata", "example", "scene000201_4spp.exr")
 OIDN_RUNNER = os.path.join(ROOT, "experiments", "oidn_denoise.py")
 
-DEFAULT_MODES = ("high (default)=;high bf16=--precision bf16;balanced=-q balanced;"
-                 "balanced bf16=-q balanced --precision bf16;fast=-q fast;fast bf16=-q fast --precision bf16;"
+DEFAULT_MODES = ("high=-q high;high bf16=-q high --precision bf16;balanced (default)=;"
+                 "balanced bf16=--precision bf16;fast=-q fast;fast bf16=-q fast --precision bf16;"
                  "control on=--control on;control on bf16=--control on --precision bf16")
 
 

@@ -39,10 +39,10 @@ OIDN = [
     ("oidn_pre", "OIDN 2.5.1, its prefilter mode (Blender's \"Accurate\")", None,
      ["--oidn", "--", "--prefilter"]),
 ]
-DEFAULT = ("default", "dndenoise, the default (`-q high`)", "models/default.dnm", [])
+DEFAULT = ("default", "dndenoise, the default (`-q balanced`)", "models/default.dnm", [])
 LEVELS = [
     ("fast", "dndenoise -q fast", "models/default.dnm", ["--", "-q", "fast"]),
-    ("balanced", "dndenoise -q balanced", "models/default.dnm", ["--", "-q", "balanced"]),
+    ("high", "dndenoise -q high", "models/default.dnm", ["--", "-q", "high"]),
 ]
 ABLATIONS = [
     ("noisy", "the noisy input", None, []),
@@ -84,15 +84,15 @@ def score(args, methods):
 
 
 def speed_lines(args):
-    bench = os.path.join(ROOT, "bench", "speed_vs_oidn.py")
-    if args.no_speed or not os.path.exists(bench):
-        return ["Not measured in this run (`--no-speed`)." if args.no_speed else
-                "Not measured: bench/speed_vs_oidn.py is not in this checkout."]
-    cmd = [sys.executable, bench, "--bin", args.bin, "--markdown"]
+    if args.no_speed:
+        return ["Not measured in this run (`--no-speed`); [dndenoise.md](dndenoise.md#speed-and-memory) "
+                "has the latest figures and their commands."]
+    cmd = [sys.executable, os.path.join(ROOT, "bench", "speed_vs_oidn.py"), "--bin", args.bin]
     print("results:", shlex.join(cmd), flush=True)
     out = subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True, text=True).stdout
-    return [f"`python3 bench/speed_vs_oidn.py --bin {os.path.relpath(args.bin, ROOT)} --markdown`:",
-            "", *out.rstrip().splitlines()]
+    return [f"`python3 bench/speed_vs_oidn.py --bin {os.path.relpath(args.bin, ROOT)}` (whole process "
+            "per frame at 1920x1080, medians of 3 interleaved rounds):", "", "```text",
+            *out.rstrip().splitlines(), "```"]
 
 
 def method_list(methods):
@@ -147,11 +147,11 @@ def page(args, command):
     lines += eval_sets.table_lines({n: results[n] for n in ("oidn", "oidn_pre", "default")},
                                    ["oidn", "oidn_pre", "default"])
     lines += ["", "## Quality levels", "",
-              "`-q fast` runs one network on the buffers as rendered, `-q balanced` OIDN's prefilter "
-              "mode, `-q high` (the default) adds the light-path split where Cycles wrote the diffuse "
-              "passes ([dndenoise.md](dndenoise.md#speed-and-memory)).", ""]
-    lines += eval_sets.table_lines({n: results[n] for n in ("oidn", "fast", "balanced", "default")},
-                                   ["oidn", "fast", "balanced", "default"])
+              "`-q fast` runs one network on the buffers as rendered, `-q balanced` (the default, "
+              "`default` here) OIDN's prefilter mode, `-q high` adds the light-path split where Cycles "
+              "wrote the diffuse passes ([dndenoise.md](dndenoise.md#speed-and-memory)).", ""]
+    lines += eval_sets.table_lines({n: results[n] for n in ("oidn", "fast", "default", "high")},
+                                   ["oidn", "fast", "default", "high"])
     lines += ["", "## Speed", ""] + speed_lines(args)
     lines += ["", "## Ablations", "",
               "Each against the default, on the same renders; the model file is named below.", ""]

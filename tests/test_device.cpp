@@ -62,6 +62,7 @@ std::vector<Mode> modes() {
   base.lightPaths = false;
   base.control = prefilter.control = split.control = ControlUse::Never;
   prefilter.lightPaths = false;
+  split.lightPaths = true;
   control.control = ControlUse::Always;
   return {{"base", base}, {"prefilter", prefilter}, {"split", split}, {"control", control}};
 }

@@ -61,17 +61,18 @@ TEST_CASE("the diffuse part and the rest sum to the render") {
   CHECK_THROWS_AS(splitDiffuse(frame), std::out_of_range);
 }
 
-TEST_CASE("with Cycles' diffuse passes the default beats its albedo + normal result") {
+TEST_CASE("with Cycles' diffuse passes -q high beats the prefilter mode alone") {
   const Denoiser denoiser = Denoiser::fromFile(std::string(DN_SOURCE_DIR) + "/models/default.dnm");
-  DenoiseOptions whole;
-  whole.lightPaths = false;
+  DenoiseOptions whole, high;
+  setQuality(whole, Quality::Balanced);
+  setQuality(high, Quality::High);
   double gain = 0;
   int frames = 0;
   for (const char* scene : {"101", "102", "103", "104", "105", "106"}) {
     const std::string stem = std::string(DN_TESTDATA) + "/pairs/scene000" + scene;
     const FrameBuffers frame = readFrame(stem + "_4spp.exr");
     const Image reference = readImage(stem + "_ref.exr", 3);
-    const DenoiseResult split = denoiser.denoise(frame, {});
+    const DenoiseResult split = denoiser.denoise(frame, high);
     const DenoiseResult plain = denoiser.denoise(frame, whole);
     CHECK(split.lightPathsSplit);
     CHECK_FALSE(plain.lightPathsSplit);
@@ -90,9 +91,10 @@ TEST_CASE("without the diffuse passes the result is the prefiltered base's, bit 
   const Denoiser denoiser = Denoiser::fromFile(std::string(DN_SOURCE_DIR) + "/models/default.dnm");
   FrameBuffers frame = readFrame(std::string(DN_TESTDATA) + "/pairs/scene000104_4spp.exr");
   frame.buffers.erase("diffuse_color");
-  DenoiseOptions whole;
-  whole.lightPaths = false;
-  const DenoiseResult a = denoiser.denoise(frame, {});
+  DenoiseOptions high, whole;
+  setQuality(high, Quality::High);
+  setQuality(whole, Quality::Balanced);
+  const DenoiseResult a = denoiser.denoise(frame, high);
   const DenoiseResult b = denoiser.denoise(frame, whole);
   CHECK_FALSE(a.lightPathsSplit);
   CHECK(a.prefiltered);
