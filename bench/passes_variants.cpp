@@ -1,7 +1,8 @@
 // The variants of the denoised light passes (dn/passes/joint_denoise.h), for
 // choosing by measurement: each light pass's guide (its term's colour pass or
 // the first-hit albedo) times each way of sharing the beauty's difference
-// (by estimated error, by magnitude, none: the residual takes it). The beauty
+// (by estimated error, by magnitude, none: the residual takes it), and the
+// colour passes by OIDN's albedo network or guided by its large one. The beauty
 // is dndenoise's default result. Writes OUTDIR/<guide>-<share>.exr with the
 // channels <key>.R/G/B of every pass (float) and beauty.R/G/B.
 //
@@ -48,20 +49,28 @@ int main(int argc, char** argv) {
     if (layout.empty()) throw IoError(input + ": has no light passes");
     const LightPassImages noisy = readLightPasses(input, layout, frame);
     std::printf("%s: %s\n", input.c_str(), layout.formula().c_str());
-    const std::vector<std::pair<std::string, LightPassGuide>> guides = {
-        {"color", LightPassGuide::TermColor}, {"albedo", LightPassGuide::Albedo}};
+    struct Apart {
+      std::string name;
+      LightPassGuide guide;
+      ColorPassDenoise colorPasses;
+    };
+    const std::vector<Apart> aparts = {
+        {"color-alb", LightPassGuide::TermColor, ColorPassDenoise::AlbedoNetwork},
+        {"albedo-alb", LightPassGuide::Albedo, ColorPassDenoise::AlbedoNetwork},
+        {"color-guided", LightPassGuide::TermColor, ColorPassDenoise::Guided}};
     const std::vector<std::pair<std::string, ShareRule>> shares = {
         {"error", ShareRule::Error},
         {"magnitude", ShareRule::Magnitude},
         {"none", ShareRule::None}};
-    for (const auto& [guideName, guide] : guides) {
+    for (const auto& variant : aparts) {
       PassDenoiseOptions options;
-      options.guide = guide;
+      options.guide = variant.guide;
+      options.colorPasses = variant.colorPasses;
       const LightPassImages apart = denoisePassesApart(base, frame, layout, noisy, options);
       for (const auto& [shareName, share] : shares) {
         options.share = share;
         const DenoisedPasses result = shareToBeauty(layout, noisy, apart, beauty, options);
-        const std::string out = outDir + "/" + guideName + "-" + shareName + ".exr";
+        const std::string out = outDir + "/" + variant.name + "-" + shareName + ".exr";
         writePasses(out, result.passes, beauty);
         std::printf("%s: max relative recombination error %.3g\n", out.c_str(),
                     result.maxRelativeError);

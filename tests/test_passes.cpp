@@ -79,8 +79,9 @@ TEST_CASE("Cycles' rule explains a Blender 3.4 render: the residual is rounding"
   CHECK(maxRelativeDifference(recombine(layout, passes), frame.get("color")) < 1e-5);
 }
 
-TEST_CASE("Blender 5 multi-part full names; the passes it lacks go to the residual") {
-  const LightPassLayout layout = findLightPasses(channelNames(kBlender5), "ViewLayer.");
+TEST_CASE("Blender 5 multi-part full names; a pass the file lacks goes to the residual") {
+  const auto names = channelNames(kBlender5);
+  const LightPassLayout layout = findLightPasses(names, "ViewLayer.");
   REQUIRE(layout.rule != nullptr);
   CHECK(layout.rule->renderer == "Cycles");
   CHECK(layout.formula() ==
@@ -88,10 +89,27 @@ TEST_CASE("Blender 5 multi-part full names; the passes it lacks go to the residu
         "Glossy Indirect) x Glossy Color + (Transmission Direct + Transmission Indirect) x "
         "Transmission Color + Residual");
   const FrameBuffers frame = readFrame(kBlender5);
-  const LightPassImages passes = readLightPasses(kBlender5, layout, frame);
-  // No Emission and Environment passes: the visible HDRI is in the residual.
-  CHECK(meanAbs(passes.at(kResidualPass)) > 0.05 * meanAbs(frame.get("color")));
-  CHECK(maxRelativeDifference(recombine(layout, passes), frame.get("color")) < 1e-5);
+  const LightPassImages all = readLightPasses(kBlender5, layout, frame);
+  CHECK(meanAbs(all.at(kResidualPass)) < 0.01 * meanAbs(frame.get("color")));
+
+  // Without Glossy Indirect the residual holds Glossy Indirect x Glossy Color.
+  const LightPassLayout lacking =
+      findLightPasses(without(names, "ViewLayer.Glossy Indirect"), "ViewLayer.");
+  CHECK(lacking.formula() ==
+        "Combined = (Diffuse Direct + Diffuse Indirect) x Diffuse Color + Glossy Direct x Glossy "
+        "Color + (Transmission Direct + Transmission Indirect) x Transmission Color + Residual");
+  const LightPassImages passes = readLightPasses(kBlender5, lacking, frame);
+  CHECK(passes.count("glossy_indirect") == 0);
+  const Image glossyIndirect =
+      readImage(kBlender5, 3,
+                {"ViewLayer.Glossy Indirect.R", "ViewLayer.Glossy Indirect.G",
+                 "ViewLayer.Glossy Indirect.B"});
+  Image expected = all.at(kResidualPass);
+  for (std::size_t i = 0; i < expected.pixels.size(); ++i)
+    expected.pixels[i] += glossyIndirect.pixels[i] * all.at("glossy_color").pixels[i];
+  CHECK(meanAbs(expected) > 0.05 * meanAbs(frame.get("color")));
+  CHECK(maxRelativeDifference(passes.at(kResidualPass), expected, 1e-2) < 1e-3);
+  CHECK(maxRelativeDifference(recombine(lacking, passes), frame.get("color")) < 1e-5);
 }
 
 TEST_CASE("a light pass without its colour pass is not used, and says so") {
@@ -114,13 +132,13 @@ TEST_CASE("Arnold's LPE AOVs add up as they are; no passes, no layout") {
   REQUIRE(layout.rule != nullptr);
   CHECK(layout.rule->renderer == "Arnold");
   CHECK(layout.formula() ==
-        "RGBA = diffuse_direct + diffuse_indirect + specular_direct + emission + Residual");
+        "RGBA = diffuse_direct + diffuse_indirect + specular_direct + emission + residual");
   CHECK(findLightPasses(channelNames(kMitsuba), "").empty());
   CHECK_THROWS_WITH_AS(requireLightPasses(kMitsuba), doctest::Contains("has no light passes"),
                        IoError);
 }
 
-TEST_CASE("jointly denoised passes recombine to the denoised beauty, each better than noisy") {
+TEST_CASE("jointly denoised passes recombine to the beauty, each as good as OIDN alone") {
   const OidnBase base = oidnBaseOfModel(kModel);
   const FrameBuffers frame = readFrame(kBlender5);
   const Denoiser denoiser = Denoiser::fromFile(kModel);
@@ -132,14 +150,22 @@ TEST_CASE("jointly denoised passes recombine to the denoised beauty, each better
   CHECK(result.layers.count("ViewLayer.Denoised Residual") == 1);
   CHECK(result.layers.size() == 10);
 
-  // Against the reference's same pass: every light and colour pass improves.
-  const FrameBuffers refFrame = readFrame(kBlender5Ref);
+  // OIDN's prefilter mode on each pass alone, as this library runs it (the
+  // light passes: share None of the default; the colour passes: guided).
   const LightPassImages noisy = readLightPasses(kBlender5, result.layout, frame);
+  PassDenoiseOptions alone;
+  alone.colorPasses = ColorPassDenoise::Guided;
+  const LightPassImages oidn = denoisePassesApart(base, frame, result.layout, noisy, alone);
+  // Against the reference's same pass: each pass with signal is better than
+  // noisy and at least as good as OIDN on it alone.
+  const FrameBuffers refFrame = readFrame(kBlender5Ref);
   const LightPassImages reference = readLightPasses(kBlender5Ref, result.layout, refFrame);
   for (const auto& key : result.layout.usedKeys()) {
+    if (meanAbs(reference.at(key)) < 1e-3 * meanAbs(refFrame.get("color"))) continue;
     CAPTURE(key);
-    CHECK(psnr(result.denoised.passes.at(key), reference.at(key)) >
-          psnr(noisy.at(key), reference.at(key)) + 1.0);
+    const double ours = psnr(result.denoised.passes.at(key), reference.at(key));
+    CHECK(ours > psnr(noisy.at(key), reference.at(key)) + 0.5);
+    CHECK(ours >= psnr(oidn.at(key), reference.at(key)));
   }
 }
 

@@ -169,7 +169,10 @@ LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& fra
   for (const auto& term : layout.terms) {
     const Image* guide = &albedo;
     if (!term.color.empty()) {
-      denoised[term.color] = cleanAlbedoLike(base, noisy.at(term.color), run);
+      const Image& color = noisy.at(term.color);
+      denoised[term.color] = options.colorPasses == ColorPassDenoise::AlbedoNetwork
+                                 ? cleanAlbedoLike(base, color, run)
+                                 : denoiseLight(base, color, albedo, normal, run);
       if (options.guide == LightPassGuide::TermColor) guide = &denoised[term.color];
     }
     for (const auto& light : term.lights)

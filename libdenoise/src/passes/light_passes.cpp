@@ -24,6 +24,7 @@ LightPassRule cyclesRule() {
   rule.documentedBy =
       "Blender manual, Render > Layers & Passes > Passes (docs.blender.org/manual/en/3.4/"
       "render/layers/passes.html)";
+  rule.residual = "Residual";
   rule.outputPrefix = "Denoised ";
   rule.passes = {
       {"diffuse_direct", {"DiffDir", "Diffuse Direct"}, false},
@@ -66,6 +67,7 @@ LightPassRule arnoldRule() {
   rule.documentedBy =
       "Arnold User Guide, Light Path Expression AOVs (help.autodesk.com/view/ARNOL/ENU/"
       "?guid=arnold_user_guide_ac_output_aovs_ac_expression_aovs_html)";
+  rule.residual = "residual";
   rule.outputPrefix = "denoised_";
   const std::vector<std::string> names = {"diffuse_direct",
                                           "diffuse_indirect",
@@ -158,7 +160,7 @@ const std::vector<LightPassRule>& lightPassRules() {
 }
 
 std::string LightPassLayout::layerName(const std::string& key) const {
-  if (key == kResidualPass) return "Residual";
+  if (key == kResidualPass) return rule ? rule->residual : "Residual";
   auto it = layers.find(key);
   return it == layers.end() ? key : it->second;
 }
@@ -174,7 +176,8 @@ std::string LightPassLayout::formula() const {
           (term.lights.size() > 1 ? "(" + lights + ")" : lights) + " x " + layerName(term.color);
     sum += (sum.empty() ? "" : " + ") + lights;
   }
-  return (rule ? rule->beauty : std::string("beauty")) + " = " + sum + " + Residual";
+  return (rule ? rule->beauty : std::string("beauty")) + " = " + sum + " + " +
+         layerName(kResidualPass);
 }
 
 std::vector<std::string> LightPassLayout::usedKeys() const {

@@ -1,11 +1,12 @@
 // Denoised light passes that add up to the denoised beauty. Each pass is
 // denoised by OIDN's networks with the guide that suits it (colour passes by
 // the albedo network, as albedo-like buffers; light passes by the large
-// prefilter-mode network with the cleaned normal and a cleaned albedo); then
-// the denoised beauty's difference from the sum of the denoised parts is
-// shared out over the parts in proportion to each part's estimated error, so
-// the renderer's rule (dn/passes/light_passes.h) gives the denoised beauty
-// back to float rounding, and one part's error does not land on another.
+// prefilter-mode network with the cleaned normal and albedo); then the
+// denoised beauty's difference from the sum of the denoised parts is shared
+// out, per pixel and channel, over the parts in proportion to each part's
+// magnitude there, so the renderer's rule (dn/passes/light_passes.h) gives
+// the denoised beauty back to float rounding, and a part takes only its own
+// share: none where it is black.
 #pragma once
 
 #include <map>
@@ -22,22 +23,32 @@
 namespace dn {
 
 // The albedo a light pass is denoised with.
+// Measured (docs/RESULTS.md#denoised-light-passes): the first-hit albedo.
 enum class LightPassGuide {
-  TermColor,  // the cleaned colour pass of its term (the cleaned albedo for terms without one)
   Albedo,     // the cleaned first-hit albedo, as OIDN run on the pass alone would take
+  TermColor,  // the cleaned colour pass of its term (the cleaned albedo for terms without one)
+};
+
+// How the colour passes (DiffCol, ...) are denoised. Measured: the albedo network.
+enum class ColorPassDenoise {
+  AlbedoNetwork,  // OIDN's albedo network, as the albedo-like buffers they are
+  Guided,         // OIDN's large network, guided by the cleaned albedo and normal
 };
 
 // How the beauty's difference from the sum of the parts is shared out.
+// Measured: by magnitude; by the estimated error it costs the passes up to
+// 4 dB (that estimate is itself noisy, and moves noise in).
 enum class ShareRule {
+  Magnitude,  // by each part's denoised magnitude (in beauty units)
   Error,      // by each part's estimated squared error (local mean of noisy - denoised)
-  Magnitude,  // by each part's denoised magnitude
   None,       // not at all: the residual takes it (for measurement only)
 };
 
 struct PassDenoiseOptions {
   OidnRunOptions run;  // device, tiling and memory of every network run
-  LightPassGuide guide = LightPassGuide::TermColor;
-  ShareRule share = ShareRule::Error;
+  LightPassGuide guide = LightPassGuide::Albedo;
+  ColorPassDenoise colorPasses = ColorPassDenoise::AlbedoNetwork;
+  ShareRule share = ShareRule::Magnitude;
   int errorRadius = 2;  // box radius of the local mean of the squared error, pixels
 };
 

@@ -34,6 +34,7 @@ struct LightPassRule {
   std::string renderer;      // "Cycles"
   std::string beauty;        // the beauty's name in the formula: "Combined"
   std::string documentedBy;  // where the rule is documented
+  std::string residual;      // the residual's pass name: "Residual"
   std::string outputPrefix;  // what goes in front of a pass's layer name in the denoised
                              // pass's name: "Denoised " (Cycles: "Denoised Diffuse Direct")
   std::vector<LightPassSpec> passes;
@@ -62,7 +63,7 @@ struct LightPassLayout {
   std::vector<std::string> notes;
 
   bool empty() const { return terms.empty(); }
-  // The file's layer name of a key, "Residual" for the residual.
+  // The file's layer name of a key; the rule's residual name for the residual.
   std::string layerName(const std::string& key) const;
   // The rule as the file's passes spell it, e.g.
   // "Combined = (DiffDir + DiffInd) x DiffCol + Emit + Residual".
