@@ -16,7 +16,7 @@ OIDN on the Combined pass in the same mode), as mean |sum - beauty| / mean
 |beauty|, and for ours the largest per-pixel relative difference. The
 passes a file lacks are its residual (beauty minus the rule's sum), denoised
 by each method like a pass (positive and negative parts apart for OIDN).
---variants also scores bench/passes_variants' guides and sharing rules.
+--variants 4 also scores bench/passes_variants' guides and sharing rules at 4 spp.
 
 Data (each set skipped when absent):
   test      Blender 3.4 test frames: testdata/dataset/test (4 and 16 spp: means of
@@ -26,7 +26,7 @@ Data (each set skipped when absent):
             and RENDERS/b5/<scene>/spp{4,16,64}.exr with ref.exr.
 
   python3 experiments/passes_eval.py [--bin build/bin] [--renders DIR] [--work DIR]
-                                     [--variants] [--results docs/RESULTS.md]
+                                     [--variants SPP...] [--results docs/RESULTS.md]
 """
 
 import argparse
@@ -164,6 +164,7 @@ def oidn_passes(oidn, found, residual, beauty, albedo, normal, prefilter):
 
 
 def run_ours(args, path, out):
+    os.makedirs(os.path.dirname(out), exist_ok=True)
     if not os.path.exists(out):
         cmd = [os.path.join(args.bin, "dndenoise"), "--passes", "-v", path, "-o", out]
         start = time.time()
@@ -184,7 +185,7 @@ def run_ours(args, path, out):
 
 def run_variants(args, path, folder):
     os.makedirs(folder, exist_ok=True)
-    if not glob.glob(os.path.join(folder, "*.exr")):
+    if len(glob.glob(os.path.join(folder, "*.exr"))) < 9:  # 3 guides x 3 sharing rules
         subprocess.run([os.path.join(args.bin, "passes_variants"), "--model",
                         os.path.join(ROOT, "models/default.dnm"), path, folder], check=True,
                        capture_output=True)
@@ -223,7 +224,7 @@ def evaluate(args):
         methods["ours"] = run_ours(args, path, os.path.join(args.work, "ours", tag + ".exr"))
         methods["oidn"] = oidn_passes(oidn, found, residual, beauty, albedo, normal, False)
         methods["oidn_pre"] = oidn_passes(oidn, found, residual, beauty, albedo, normal, True)
-        if args.variants:
+        if args.variants and spp in args.variants:
             methods.update(run_variants(args, path, os.path.join(args.work, "variants", tag)))
         for method, (passes, whole) in methods.items():
             recombined = recombine(terms, passes, passes.get("residual"))
@@ -293,7 +294,8 @@ def main():
     ap.add_argument("--bin", default=os.path.join(ROOT, "build/bin"))
     ap.add_argument("--renders", default="/work/data/passes/renders")
     ap.add_argument("--work", default="/work/data/passes/eval")
-    ap.add_argument("--variants", action="store_true", help="also bench/passes_variants' variants")
+    ap.add_argument("--variants", type=int, nargs="*", default=[],
+                    help="also bench/passes_variants' variants at these spp (e.g. 4)")
     ap.add_argument("--results", help="write the tables into this file's passes_eval section")
     args = ap.parse_args()
     rows = evaluate(args)
