@@ -42,48 +42,38 @@ const char* kUsage = R"(usage: dndenoise [options] IN.exr -o OUT.exr
        dndenoise [options] IN.#.exr -o OUT.#.exr            (frame sequences, as oiiotool)
        dndenoise [options] A.exr B.exr ... -o DIR/           (many files, model loaded once)
 
-Denoises renders with the diffusion model. Multilayer EXRs from Blender/Cycles
-(Denoising Data and light passes enabled) and other renderers' usual channel
-names are read as they are; the result is added as a layer beside every input
-layer and the input's metadata (or written alone with --rgb-only).
+Denoises Monte Carlo renders with Intel Open Image Denoise's networks run in
+their prefilter mode (albedo and normal denoised first), plus, where Cycles
+wrote its diffuse light passes, the diffuse part and the rest denoised apart
+and averaged with the whole. Where the networks leave correlated noise (a pixel
+filter that splats samples), the Control Module, fed the buffers OIDN ignores,
+steers them with diffusion refinement. Multilayer EXRs from Blender/Cycles and
+other renderers' usual channel names are read as they are; the result is added
+as a layer beside every input layer and the input's metadata (or written alone
+with --rgb-only).
 
-model and sampling:
+quality (the default model, models/default.dnm, and others over OIDN's networks):
+  -q, --quality fast|balanced|high
+                      fast: one network on the noisy buffers (OIDN's usual call);
+                      balanced: albedo and normal prefiltered (OIDN's prefilter
+                      mode); high (default): balanced plus the light-path split
+                      where the render has the passes
+  --prefilter on|off  albedo and normal denoised first (on, default: fast turns it off)
+  --light-paths on|off  the light-path split where the passes exist (on, default:
+                      fast and balanced turn it off)
+  --control auto|on|off  models with a Control Module (the default): steer the base
+                      when it leaves correlated noise (auto, default), always, or never
+  --sigmas LIST|none  models with a diffusion Control Module (the default): the
+                      refinement's noise levels, noisiest first (default: the
+                      model's); none: the base's estimate alone
+  --samples K         diffusion models: mean of K samples (1-256), plus their standard
+                      deviation as an 'uncertainty' layer
+  --seed N            random seed >= 0 (default 0): same seed, same output
+  --exposure auto|K   scale the radiance by K before the networks and back after;
+                      auto (default): the model's autoexposure. K must lie within
+                      0.01 to 100 times the autoexposure (else exit 1)
   --model FILE        model file (default: $DN_MODEL, else default.dnm in $DN_MODEL_DIR,
                       else the shipped models/default.dnm beside the executable)
-  --steps N           diffusion steps of the respaced schedule, 1-1000 (default: the
-                      model's, 27)
-  --skip S            skip the S noisiest steps (0 <= S < steps), starting from the
-                      noised render
-                      (default: the model's tuned value, adapted to the noise
-                      measured on the render; docs/dndenoise.md)
-  --spp N             the input's samples per pixel, >= 1 (default: the file's Cycles
-                      metadata); given, it scales the default skip and
-                      --mean-match instead of the measured noise
-  --sampler ddpm|ddim sampler (default ddpm); --eta E (0-1) for DDIM
-  --sigmas LIST|none  models with a diffusion Control Module over the OIDN base:
-                      the refinement's noise levels, noisiest first (default: the
-                      model's); none: the base's estimate alone
-  --control auto|on|off  such models: steer the base with the Control Module
-                      when the base leaves correlated noise (auto, default: a
-                      pixel filter that splats samples), always, or never
-  --prefilter on|off  OIDN base with albedo and normal: denoise both with OIDN's
-                      own networks first, then the colour with its network for
-                      clean aux (on, default, where the model holds them: OIDN's
-                      prefilter mode, Blender's "Accurate"); off: noisy aux as is
-  --light-paths on|off  prefiltered, with Cycles' diffuse light passes: also
-                      denoise the diffuse part (guided by its colour) and the
-                      rest apart, and average their sum with the whole (on,
-                      default; 2.6 times the time); off: the whole only
-  --seed N            random seed >= 0 (default 0): same seed, same output
-  --samples K         mean of K samples (1-256), plus their standard deviation as an
-                      'uncertainty' layer
-  --exposure auto|K   scale the radiance by K before the model and back after;
-                      auto (default) brings the frame's mean brightness to what
-                      the model was trained on
-  --mean-match SIGMA  rescale the result so its local mean (Gaussian, SIGMA px)
-                      matches the render's, which is unbiased (default 2 at the
-                      model's tuning noise level, scaled with the render's; 0 = off;
-                      at most 1000)
 input buffers:
   --color FILE, --albedo FILE, --normal FILE, --depth FILE, --<buffer> FILE
                       one file per buffer (EXR, PFM, HDR); --alb/--nrm also work
@@ -121,9 +111,8 @@ display (PNG/JPEG/TIFF outputs and --preview):
                       config also offers Filmic)
   --list-views        print the config's display / view pairs and exit
 resources:
-  --tile N            network tile size in pixels, 16-8192 (default: from --maxmem,
-                      at most 256)
-  --overlap N         tile overlap, 0-1024 and below the tile (default 32)
+  --tile N            network tile size in pixels, 16-8192 (default: the whole
+                      frame, or the largest tile under --maxmem)
   --maxmem MB         memory budget for network activations, >= 100 (default 3000)
   --threads N         CPU threads, 1-1024 (default: all cores)
   --device cpu|cuda   (default cpu; cuda needs a CUDA build of LibTorch and a GPU)
@@ -134,8 +123,34 @@ checks and timing:
   -v                  progress with ETA and input statistics on stderr
   --version           versions of the tool and its libraries
   -h, --help          this text
+the from-scratch diffusion model (an experiment: --model models/diffusion-scratch.dnm,
+docs/model-card-diffusion-scratch.md); with another model these exit 1:
+  --steps N           diffusion steps of the respaced schedule, 1-1000 (default 27)
+  --skip S            skip the S noisiest steps (0 <= S < steps) (default: the
+                      model's tuned value, adapted to the noise measured on the render)
+  --spp N             the input's samples per pixel, >= 1 (default: the file's Cycles
+                      metadata); given, it scales the default skip and --mean-match
+  --sampler ddpm|ddim sampler (default ddpm); --eta E (0-1) for DDIM
+  --mean-match SIGMA  rescale the result so its local mean (Gaussian, SIGMA px)
+                      matches the render's (default 2 at the model's tuning noise
+                      level, scaled with the render's; 0 = off; at most 1000)
+  --overlap N         tile overlap, 0-1024 and below the tile (default 32)
 exit codes: 0 ok, 1 bad input or arguments, 2 a --maxerror check failed
 )";
+
+// Which models an option acts on (checked once the model is loaded).
+enum class OptionScope {
+  OidnBase,          // models over OIDN's networks (the default)
+  Control,           // those with a Control Module
+  DiffusionControl,  // those with a diffusion Control Module
+  Diffusion,         // a diffusion Control Module or the from-scratch model
+  Scratch,           // the from-scratch diffusion model (an experiment)
+};
+
+struct GivenOption {
+  std::string flag;
+  OptionScope scope;
+};
 
 struct Options {
   std::vector<std::string> inputs;
@@ -151,7 +166,8 @@ struct Options {
   std::string preview;
   tonemap::PreviewOptions display;
   bool listViews = false;
-  bool passes = false;  // --passes
+  bool passes = false;             // --passes
+  std::vector<GivenOption> given;  // options that act on some models only
 };
 
 // The network's size multiple: a smaller tile cannot be denoised.
@@ -159,12 +175,13 @@ constexpr int kMinTile = 16;
 
 // Ranges that need two options at once.
 void checkOptionPairs(const Options& o) {
+  const ScratchSampling& scratch = o.denoise.scratch;
   if (o.denoise.tile > 0 && o.denoise.overlap >= o.denoise.tile)
     throw cli::UsageError(fmt::format("--overlap {} must be smaller than --tile {}",
                                       o.denoise.overlap, o.denoise.tile));
-  if (!o.denoise.respacing.empty() && o.denoise.skip >= std::stoi(o.denoise.respacing))
-    throw cli::UsageError(fmt::format("--skip {} must be smaller than --steps {}", o.denoise.skip,
-                                      o.denoise.respacing));
+  if (!scratch.respacing.empty() && scratch.skip >= std::stoi(scratch.respacing))
+    throw cli::UsageError(
+        fmt::format("--skip {} must be smaller than --steps {}", scratch.skip, scratch.respacing));
 }
 
 std::vector<std::string> splitBufferList(const std::string& text) {
@@ -199,18 +216,29 @@ Options parseArgs(int argc, char** argv) {
       o.output = args.value("-o");
     } else if (args.flag("--model")) {
       o.model = args.value("--model");
+    } else if (args.flag("-q", "--quality")) {
+      const std::string v = args.value("--quality");
+      const auto quality = qualityFromName(v);
+      if (!quality) throw cli::UsageError("--quality must be fast, balanced or high, got " + v);
+      setQuality(o.denoise, *quality);
+      o.given.push_back({"--quality", OptionScope::OidnBase});
     } else if (args.flag("--steps")) {
-      o.denoise.respacing = std::to_string(args.intValue("--steps", 1, 1000));
+      o.denoise.scratch.respacing = std::to_string(args.intValue("--steps", 1, 1000));
+      o.given.push_back({"--steps", OptionScope::Scratch});
     } else if (args.flag("--skip")) {
-      o.denoise.skip = args.intValue("--skip", 0, 999);
+      o.denoise.scratch.skip = args.intValue("--skip", 0, 999);
+      o.given.push_back({"--skip", OptionScope::Scratch});
     } else if (args.flag("--sampler")) {
       std::string s = args.value("--sampler");
       if (s != "ddpm" && s != "ddim") throw cli::UsageError("--sampler must be ddpm or ddim");
-      o.denoise.sampler = s == "ddim" ? SamplerKind::Ddim : SamplerKind::Ddpm;
+      o.denoise.scratch.sampler = s == "ddim" ? SamplerKind::Ddim : SamplerKind::Ddpm;
+      o.given.push_back({"--sampler", OptionScope::Scratch});
     } else if (args.flag("--eta")) {
-      o.denoise.eta = args.doubleValue("--eta", 0.0, 1.0);
+      o.denoise.scratch.eta = args.doubleValue("--eta", 0.0, 1.0);
+      o.given.push_back({"--eta", OptionScope::Scratch});
     } else if (args.flag("--spp")) {
-      o.denoise.spp = args.intValue("--spp", 1, 1 << 24);
+      o.denoise.scratch.spp = args.intValue("--spp", 1, 1 << 24);
+      o.given.push_back({"--spp", OptionScope::Scratch});
     } else if (args.flag("--exposure")) {
       const std::string v = args.value("--exposure");
       o.denoise.exposure = v == "auto" ? 0.0 : cli::Args::toDouble("--exposure", v);
@@ -228,6 +256,7 @@ Options parseArgs(int argc, char** argv) {
         throw cli::UsageError(std::string("--sigmas: ") + e.what());
       }
       o.denoise.sigmas = sigmas;
+      o.given.push_back({"--sigmas", OptionScope::DiffusionControl});
     } else if (args.flag("--control")) {
       const std::string v = args.value("--control");
       if (v == "auto")
@@ -238,21 +267,26 @@ Options parseArgs(int argc, char** argv) {
         o.denoise.control = ControlUse::Never;
       else
         throw cli::UsageError("--control must be auto, on or off, got " + v);
+      o.given.push_back({"--control", OptionScope::Control});
     } else if (args.flag("--prefilter")) {
       const std::string v = args.value("--prefilter");
       if (v != "on" && v != "off") throw cli::UsageError("--prefilter must be on or off, got " + v);
       o.denoise.prefilter = v == "on";
+      o.given.push_back({"--prefilter", OptionScope::OidnBase});
     } else if (args.flag("--light-paths")) {
       const std::string v = args.value("--light-paths");
       if (v != "on" && v != "off")
         throw cli::UsageError("--light-paths must be on or off, got " + v);
       o.denoise.lightPaths = v == "on";
+      o.given.push_back({"--light-paths", OptionScope::OidnBase});
     } else if (args.flag("--seed")) {
       o.denoise.seed = static_cast<uint64_t>(args.intValue("--seed", 0, INT32_MAX));
     } else if (args.flag("--samples")) {
       o.denoise.samples = args.intValue("--samples", 1, 256);
+      o.given.push_back({"--samples", OptionScope::Diffusion});
     } else if (args.flag("--mean-match")) {
-      o.denoise.meanMatchSigma = args.doubleValue("--mean-match", 0.0, 1000.0);
+      o.denoise.scratch.meanMatchSigma = args.doubleValue("--mean-match", 0.0, 1000.0);
+      o.given.push_back({"--mean-match", OptionScope::Scratch});
     } else if (args.flag("--channels")) {
       try {
         o.read.overrides.insert(parseChannelOverride(args.value("--channels")));
@@ -280,6 +314,7 @@ Options parseArgs(int argc, char** argv) {
       o.inplace = true;
     } else if (args.flag("--passes")) {
       o.passes = true;
+      o.given.push_back({"--passes", OptionScope::OidnBase});
     } else if (args.flag("--preview")) {
       o.preview = args.value("--preview");
     } else if (args.flag("--ocio")) {
@@ -294,6 +329,7 @@ Options parseArgs(int argc, char** argv) {
       o.denoise.tile = args.intValue("--tile", kMinTile, 8192);
     } else if (args.flag("--overlap")) {
       o.denoise.overlap = args.intValue("--overlap", 0, 1024);
+      o.given.push_back({"--overlap", OptionScope::Scratch});
     } else if (args.flag("--maxmem")) {
       o.denoise.maxMemoryBytes = args.doubleValue("--maxmem", 100.0, 1e7) * 1e6;
     } else if (args.flag("--threads")) {
@@ -470,7 +506,30 @@ void reportPasses(const std::string& name, const PassesResult& passes) {
              name, passes.denoised.maxRelativeError);
 }
 
-// One line naming what the model needs when `has` lacks some of it.
+// One line, exit 1, for an option given that the loaded model has no use for.
+void checkOptionsApply(const Options& o, const Denoiser& denoiser) {
+  const ModelInfo& info = denoiser.info();
+  const bool oidn = denoiser.overOidnBase();
+  const bool control = oidn && info.has_control;
+  const bool diffusionControl = control && info.oidn.control.diffusion;
+  for (const auto& [flag, scope] : o.given) {
+    const char* needs = nullptr;
+    if (scope == OptionScope::OidnBase && !oidn)
+      needs = "models over OIDN's networks, such as the default";
+    else if (scope == OptionScope::Control && !control)
+      needs = "models with a Control Module, such as the default";
+    else if (scope == OptionScope::DiffusionControl && !diffusionControl)
+      needs = "models with a diffusion Control Module, such as the default";
+    else if (scope == OptionScope::Diffusion && !diffusionControl && oidn)
+      needs = "diffusion models: the default or the from-scratch model";
+    else if (scope == OptionScope::Scratch && oidn)
+      needs = "the from-scratch diffusion model (models/diffusion-scratch.dnm)";
+    if (needs)
+      throw cli::UsageError(
+          fmt::format("{} applies only to {}; {} is not one (see --help)", flag, needs, o.model));
+  }
+}
+
 // Which of the frame's buffers the network saw, and which it had no use for.
 void reportBuffers(const std::string& name, const std::vector<std::string>& used,
                    const std::vector<std::string>& present) {
@@ -562,6 +621,7 @@ int run(Options o, int argc, char** argv) {
       throw IoError(e.what());
     }
   }();
+  checkOptionsApply(o, denoiser);
   if (o.verbose)
     fmt::print(stderr, "dndenoise: model {} loaded in {:.2f} s\n", o.model,
                std::chrono::duration<double>(Clock::now() - loadStart).count());
@@ -605,7 +665,11 @@ int run(Options o, int argc, char** argv) {
     DenoiseResult result;
     for (int r = 0; r < o.repeats; ++r) {
       const auto t0 = Clock::now();
-      result = denoiser.denoise(frame, options);
+      try {
+        result = denoiser.denoise(frame, options);
+      } catch (const std::invalid_argument& e) {
+        throw IoError(fmt::format("{}: {}", name, e.what()));
+      }
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }
     if (progress) progress->finish();
@@ -617,7 +681,7 @@ int run(Options o, int argc, char** argv) {
                  100 * result.noiseLeft->fraction(),
                  correlatedNoiseLeft(*result.noiseLeft) ? "correlated (a splatting pixel filter)"
                                                         : "independent per pixel");
-    if ((o.verbose || o.repeats > 1) && denoiser.info().base_kind == BaseKind::Oidn) {
+    if ((o.verbose || o.repeats > 1) && !result.plan) {
       std::sort(times.begin(), times.end());
       fmt::print(stderr,
                  "dndenoise: {}: {}, exposure x{:.3g}, {} network steps, {} tile(s) of {} px, "
@@ -641,11 +705,12 @@ int run(Options o, int argc, char** argv) {
           stderr,
           "dndenoise: {}: {} spp, exposure x{:.3g}, {}, skip {}, {} steps, mean matching {:.2g} "
           "px, {} tile(s) of {} px, {:.2f} s (median of {}), {:.2f} s/MPix\n",
-          name, result.plan.spp > 0 ? std::to_string(result.plan.spp) : "unknown", result.exposure,
-          result.plan.noise >= 0 ? fmt::format("noise {:.3g} (x{:.2f} the model's)",
-                                               result.plan.noise, result.plan.noiseScale)
-                                 : std::string("noise not measured"),
-          result.plan.skip, result.steps, result.plan.meanMatchSigma, result.tileCount,
+          name, result.plan->spp > 0 ? std::to_string(result.plan->spp) : "unknown",
+          result.exposure,
+          result.plan->noise >= 0 ? fmt::format("noise {:.3g} (x{:.2f} the model's)",
+                                                result.plan->noise, result.plan->noiseScale)
+                                  : std::string("noise not measured"),
+          result.plan->skip, result.steps, result.plan->meanMatchSigma, result.tileCount,
           result.tileSize, times[times.size() / 2], times.size(),
           times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
     }

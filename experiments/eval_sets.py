@@ -7,6 +7,7 @@ spp, as dnmetrics computes them; per-file metrics in WORK/<name>/metrics.json.
 
   eval_sets.py --name oidn --oidn                      OIDN 2 itself (pyoidn, colour + albedo + normal)
   eval_sets.py --name oidn_alb --oidn -- --aux albedo  OIDN with colour + albedo (oidn_denoise.py flags)
+  eval_sets.py --name isik --isik models/isik.pt       the Isik-style kernel network (dncleanse)
   eval_sets.py --name noisy                            the input
   eval_sets.py --name ctl -- --model /work/train/diff.dnm --sigmas 0.05,0.02   dndenoise with these flags
   eval_sets.py --name ctl --reuse -- ...               the same, keeping results already made (new renders only)
@@ -105,6 +106,9 @@ def evaluate(args, extra):
             result = os.path.join(out_dir, f"{group}_{scene}_spp{spp}.exr")
             if args.reuse and os.path.exists(result):
                 pass
+            elif args.isik:
+                run([os.path.join(args.bin, "dncleanse"), source, "-o", result, "--model", args.isik,
+                     "--rgb-only"])
             elif args.oidn:
                 run([sys.executable, os.path.join(HERE, "oidn_denoise.py"), "--threads", str(args.threads),
                      *extra, source, "-o", result])
@@ -115,7 +119,8 @@ def evaluate(args, extra):
         rows.append({"set": group, "scene": scene, "spp": spp, **{k: m[k] for k in METRICS}})
         print(f"{args.name} {group}/{scene} spp{spp}: PSNR {m['psnr']:.2f} FLIP {m['flip']:.4f}", flush=True)
     with open(os.path.join(out_dir, "metrics.json"), "w") as f:
-        json.dump({"name": args.name, "oidn": args.oidn, "flags": extra, "rows": rows}, f, indent=1)
+        json.dump({"name": args.name, "oidn": args.oidn, "isik": args.isik, "flags": extra, "rows": rows},
+                  f, indent=1)
 
 
 def load_results(work, names):
@@ -259,6 +264,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--name", help="name of the method (output subfolder)")
     p.add_argument("--oidn", action="store_true", help="run OIDN (pyoidn) instead of dndenoise")
+    p.add_argument("--isik", metavar="MODEL", help="run dncleanse with this kernel network instead")
     p.add_argument("--table", nargs="+", metavar="NAME", help="print a table of stored results")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), help="count the frames where B beats A")
     p.add_argument("--results", help="with --table: write it into this file's eval_sets section instead")

@@ -16,6 +16,8 @@ Case = namedtuple("Case", "name cmd code message keep absent check env", default
 
 # dndenoise with the tiny model: a 32x32 frame takes well under a second.
 D = "{dndenoise} --model {model} --threads 1 --steps 4 --skip 1"
+# dndenoise with the shipped default model (OIDN's networks) on the same frame.
+S = "{dndenoise} --model {shipped} --threads 1"
 M = "{dnmetrics}"
 C = "{dncleanse}"
 T = "{dntrain}"
@@ -43,6 +45,20 @@ CASES = [
     Case("--exposure -2", D + " --exposure -2 {frame} -o {w}/x.exr", 1, "--exposure", absent=("{w}/x.exr",)),
     Case("--exposure 0", D + " --exposure 0 {frame} -o {w}/x.exr", 1, "--exposure"),
     Case("--exposure 1e300", D + " --exposure 1e300 {frame} -o {w}/x.exr", 1, "--exposure"),
+    Case("--exposure 1e-30", D + " --exposure 1e-30 {frame} -o {w}/x.exr", 1,
+         "times the frame's autoexposure", absent=("{w}/x.exr",)),
+    Case("--exposure 1e-30, the default model", S + " --exposure 1e-30 {frame} -o {w}/x.exr", 1,
+         "times the frame's autoexposure", absent=("{w}/x.exr",)),
+    Case("--exposure 1e30, the default model", S + " --exposure 1e30 {frame} -o {w}/x.exr", 1,
+         "--exposure must be auto or a number", absent=("{w}/x.exr",)),
+    Case("--quality turbo", S + " -q turbo {frame} -o {w}/x.exr", 1, "--quality must be fast, balanced or high"),
+    Case("--steps with the default model", S + " --steps 4 {frame} -o {w}/x.exr", 1,
+         "--steps applies only to the from-scratch diffusion model", absent=("{w}/x.exr",)),
+    Case("--quality with the from-scratch model", D + " -q fast {frame} -o {w}/x.exr", 1,
+         "--quality applies only to models over OIDN's networks", absent=("{w}/x.exr",)),
+    Case("--control with a model without a Control Module",
+         "{dndenoise} --threads 1 --model {oidn_base} --control on {frame} -o {w}/x.exr", 1,
+         "--control applies only to models with a Control Module", absent=("{w}/x.exr",)),
     Case("--eta nan", D + " --eta nan {frame} -o {w}/x.exr", 1, "finite"),
     Case("--control maybe", D + " --control maybe {frame} -o {w}/x.exr", 1, "--control must be auto, on or off",
          absent=("{w}/x.exr",)),

@@ -75,6 +75,9 @@ def make_fixtures(w, bins):
     frame_dir = os.path.join(data, "val", "scene_0", "frame_0")
     files = {"w": w, "data": data, "base": p("base.dnm"), "model": p("model.dnm"), "cleanser": p("cleanser.pt")}
     files["frame"] = p("frame.exr")
+    models = os.path.join(os.path.dirname(bins["dndenoise"]), "..", "models")
+    files["shipped"] = os.path.realpath(os.path.join(models, "default.dnm"))
+    files["oidn_base"] = os.path.realpath(os.path.join(models, "oidn.dnm"))
     shutil.copy(os.path.join(frame_dir, "spp4_00.exr"), files["frame"])
     files["ref"] = p("ref.exr")
     shutil.copy(os.path.join(frame_dir, "gt_a.exr"), files["ref"])

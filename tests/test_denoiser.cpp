@@ -1,4 +1,5 @@
-// The inference pipeline (dn/infer/denoiser.h): sampling defaults adapted to the
+// The from-scratch diffusion experiment behind the Denoiser
+// (dn/experiments/scratch_diffusion.h): sampling defaults adapted to the
 // input's sample count, and autoexposure.
 #include "doctest_torch.h"
 #include "tiny_models.h"
@@ -7,6 +8,7 @@
 
 #include <cmath>
 
+#include "dn/experiments/scratch_diffusion.h"
 #include "dn/infer/denoiser.h"
 
 using namespace dn;
@@ -41,7 +43,7 @@ TEST_CASE("default skip and mean matching radius follow the input's noise level"
   ModelInfo info = tinyInfo();
   info.notes["default_spp"] = "4";
   const NoiseSchedule schedule = info.samplingSchedule();
-  const DenoiseOptions defaults;
+  const ScratchSampling defaults;
   const double anchor = startNoise(schedule, 18);
 
   for (int unknownOrAnchor : {0, 4}) {
@@ -65,7 +67,7 @@ TEST_CASE("default skip and mean matching radius follow the input's noise level"
   CHECK(p1.meanMatchSigma == doctest::Approx(4.0));
 
   // --spp beats the file; explicit skip and radius beat the adaptation.
-  DenoiseOptions explicitOptions;
+  ScratchSampling explicitOptions;
   explicitOptions.spp = 64;
   CHECK(planSampling(info, schedule, explicitOptions, 4).skip == p64.skip);
   explicitOptions.skip = 5;
@@ -91,7 +93,7 @@ TEST_CASE("a measured noise level wins over the sample count when the model has 
   info.notes["default_spp"] = "4";
   info.notes["noise_reference"] = "0.2";
   const NoiseSchedule schedule = info.samplingSchedule();
-  const DenoiseOptions defaults;
+  const ScratchSampling defaults;
   const double anchor = startNoise(schedule, 18);
 
   // As noisy as the reference: the defaults, whatever the file's count says.
@@ -115,7 +117,7 @@ TEST_CASE("a measured noise level wins over the sample count when the model has 
   CHECK(planSampling(info, schedule, defaults, 4, 0.0).noiseScale == kMinNoiseScale);
 
   // --spp is the user's word: the sample count decides, not the measurement.
-  DenoiseOptions withSpp;
+  ScratchSampling withSpp;
   withSpp.spp = 16;
   CHECK(planSampling(info, schedule, withSpp, 4, 0.4).noiseScale == doctest::Approx(0.5));
   // Not measured, or no reference in the model: the sample count decides.
@@ -133,21 +135,21 @@ TEST_CASE("denoise measures the render's noise only when the model has a referen
   frame.buffers["color"] = randomImage(16, 16, 3, 0.5, 4);
   frame.buffers["albedo"] = randomImage(16, 16, 3, 1.0, 5);
   frame.buffers["diffuse_direct"] = randomImage(16, 16, 3, 0.2, 6);
-  CHECK(Denoiser(loaded).denoise(frame, {}).plan.noise == -1.0);
+  CHECK(Denoiser(loaded).denoise(frame, {}).plan->noise == -1.0);
 
   loaded.info.notes["noise_reference"] = "0.2";
   const Denoiser denoiser(loaded);
   const auto result = denoiser.denoise(frame, {});
-  CHECK(result.plan.noise > 0.0);
-  CHECK(result.plan.noise == doctest::Approx(denoiser.measureNoise(frame)));
-  CHECK(result.plan.noiseScale == doctest::Approx(result.plan.noise / 0.2));
+  CHECK(result.plan->noise > 0.0);
+  CHECK(result.plan->noise == doctest::Approx(denoiser.measureNoise(frame)));
+  CHECK(result.plan->noiseScale == doctest::Approx(result.plan->noise / 0.2));
   // Measured at the model's exposure: a forced exposure leaves the plan as it is.
   DenoiseOptions forced;
   forced.exposure = 3.0;
   const auto exposed = denoiser.denoise(frame, forced);
   CHECK(exposed.exposure == 3.0);
-  CHECK(exposed.plan.noise == result.plan.noise);
-  CHECK(exposed.plan.skip == result.plan.skip);
+  CHECK(exposed.plan->noise == result.plan->noise);
+  CHECK(exposed.plan->skip == result.plan->skip);
 }
 
 TEST_CASE("autoexposure: a brighter render gives the same result, brighter") {

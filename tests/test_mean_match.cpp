@@ -1,12 +1,12 @@
-// Local mean matching (dn/infer/mean_match.h): the Gaussian blur against closed-form
+// Local mean matching (dn/experiments/mean_match.h): the Gaussian blur against closed-form
 // values, and the correction against a known reference.
 #include <cmath>
 #include <limits>
 
 #include "doctest_torch.h"
 
-#include "dn/infer/highlights.h"
-#include "dn/infer/mean_match.h"
+#include "dn/experiments/highlights.h"
+#include "dn/experiments/mean_match.h"
 
 using namespace dn;
 

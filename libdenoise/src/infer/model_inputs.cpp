@@ -120,6 +120,21 @@ torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, in
   return region;
 }
 
+torch::Tensor imageToTensor(const Image& image) {
+  return imageRegionToTensor(image, 0, 0, image.height, image.width);
+}
+
+Image tensorToImage(const torch::Tensor& tensor) {
+  const auto chw = tensor.squeeze(0);
+  Image image(static_cast<int>(chw.size(2)), static_cast<int>(chw.size(1)),
+              static_cast<int>(chw.size(0)));
+  // Straight into the image's pixels: no intermediate full-frame copy.
+  torch::from_blob(image.pixels.data(), {image.height, image.width, image.channels},
+                   torch::kFloat32)
+      .copy_(chw.permute({1, 2, 0}));
+  return image;
+}
+
 torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,
                                   const std::vector<std::string>& buffers, tonemap::Curve curve,
                                   int64_t y0, int64_t x0, int64_t height, int64_t width,

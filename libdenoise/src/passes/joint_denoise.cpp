@@ -4,6 +4,8 @@
 #include <cmath>
 
 #include "dn/infer/denoiser.h"
+#include "dn/infer/model_inputs.h"
+#include "dn/infer/oidn_pipeline.h"
 #include "dn/io/buffer_io.h"
 #include "dn/nn/model_file.h"
 #include "dn/nn/oidn_control.h"
@@ -163,8 +165,10 @@ LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& fra
   if (!base->canPrefilter())
     throw std::invalid_argument("denoising light passes needs OIDN's prefilter-mode networks");
   const OidnRunOptions& run = options.run;
-  const Image albedo = cleanAlbedoLike(base, frame.get("albedo"), run);
-  const Image normal = runNetwork(base, "nrm", {{"normal", frame.get("normal")}}, run);
+  // The guides as OIDN's prefilter mode cleans them (dn/infer/oidn_pipeline.h).
+  const FrameBuffers clean = withCleanAux(base, frame, run, run);
+  const Image& albedo = clean.get("albedo");
+  const Image& normal = clean.get("normal");
   LightPassImages denoised;
   for (const auto& term : layout.terms) {
     const Image* guide = &albedo;

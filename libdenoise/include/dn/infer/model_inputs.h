@@ -38,6 +38,9 @@ int64_t auxChannelCount(const std::vector<std::string>& buffers);
 // A rectangle of an image as a (1,C,height,width) float tensor (copied).
 torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, int64_t height,
                                   int64_t width);
+// (1,C,H,W) float tensor of an interleaved image, and back.
+torch::Tensor imageToTensor(const Image& image);
+Image tensorToImage(const torch::Tensor& tensor);
 
 // normalizeAux of the frame's `buffers` over one rectangle: the same numbers as
 // normalizing the whole frame and cropping, but a frame's worth of aux channels

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "dn/image.h"
-#include "dn/infer/denoiser.h"
+#include "dn/infer/denoise_options.h"
 #include "dn/infer/oidn_filter.h"
 #include "dn/io/buffers.h"
 #include "dn/nn/oidn_unet.h"

@@ -1,4 +1,4 @@
-#include "dn/infer/highlights.h"
+#include "dn/experiments/highlights.h"
 
 #include <algorithm>
 #include <cmath>

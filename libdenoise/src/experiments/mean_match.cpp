@@ -1,4 +1,4 @@
-#include "dn/infer/mean_match.h"
+#include "dn/experiments/mean_match.h"
 
 #include <cmath>
 #include <vector>

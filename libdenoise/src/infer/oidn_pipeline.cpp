@@ -1,0 +1,282 @@
+#include "dn/infer/oidn_pipeline.h"
+
+#include <algorithm>
+#include <stdexcept>
+#include <utility>
+
+#include <ATen/CPUGeneratorImpl.h>
+
+#include "dn/diffusion/refine.h"
+#include "dn/infer/control_inputs.h"
+#include "dn/infer/light_paths.h"
+#include "dn/infer/model_inputs.h"
+#include "dn/infer/noise_estimate.h"
+
+namespace dn {
+
+namespace {
+
+bool contains(const std::vector<std::string>& names, const std::string& name) {
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
+// The image mirrored about its diagonal: x and y swapped.
+Image transposed(const Image& image) {
+  Image out(image.height, image.width, image.channels);
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      std::copy_n(image.pixel(x, y), image.channels, out.pixel(y, x));
+  return out;
+}
+
+// The frame's albedo or normal (setName "alb" or "nrm") denoised by the base's own network.
+Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& frame,
+                 const OidnRunOptions& options) {
+  OidnUNet net = base->net(setName);
+  net->to(options.device);
+  return tensorToImage(runOidn(net, oidnInputSet(setName), frame, options).image);
+}
+
+// The caller's exposure, checked against OIDN's autoexposure of the frame; 0 stays automatic.
+float checkedExposure(const DenoiseOptions& options, const FrameBuffers& frame) {
+  if (options.exposure > 0)
+    checkExposure(options.exposure, tonemap::oidnExposure(frame.get("color")));
+  return static_cast<float>(options.exposure);
+}
+
+}  // namespace
+
+FrameBuffers withCleanAux(const OidnBase& base, const FrameBuffers& frame,
+                          const OidnRunOptions& albedoRun, const OidnRunOptions& normalRun) {
+  FrameBuffers clean;
+  clean.width = frame.width;
+  clean.height = frame.height;
+  clean.buffers["color"] = frame.get("color");
+  clean.buffers["albedo"] = cleanedAux(base, "alb", frame, albedoRun);
+  clean.buffers["normal"] = cleanedAux(base, "nrm", frame, normalRun);
+  return clean;
+}
+
+// With the light-path split the diffuse colour is cleaned the same way as the
+// albedo and the large network also denoises the diffuse part, guided by it,
+// and the rest; the mean of the whole and the sum of the parts is the result.
+// The parts are denoised transposed: the network's errors there are less alike
+// its errors on the whole, so the mean gains more (docs/dndenoise.md#light-paths).
+// Each network run is an equal share of the progress.
+OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame,
+                                 const OidnRunOptions& options, bool splitLightPaths) {
+  const int runs = splitLightPaths ? 6 : 3;
+  // The images held beside the networks' activations come out of the memory
+  // budget (a 4K frame peaked at 4.2 GB without this): the colour and the
+  // cleaned buffers, and with the split its parts, their transposed guides
+  // and the results.
+  const double held =
+      (splitLightPaths ? 10.0 : 3.0) * 3 * sizeof(float) * double(frame.width) * frame.height;
+  int run = 0;
+  auto next = [&]() {
+    OidnRunOptions o = options;
+    o.maxMemoryBytes = std::max(options.maxMemoryBytes - held, options.maxMemoryBytes / 4);
+    const int k = run++;
+    if (options.progress) o.progress = [&, k](double f) { options.progress((k + f) / runs); };
+    return o;
+  };
+  const OidnRunOptions albedoRun = next(), normalRun = next();  // in this order: progress
+  const FrameBuffers clean = withCleanAux(base, frame, albedoRun, normalRun);
+  const OidnInputSet& set = oidnInputSet("hdr_calb_cnrm_large");
+  OidnUNet net = base->net(set.name);
+  net->to(options.device);
+  OidnRunResult whole = runOidn(net, set, clean, next());
+  if (!splitLightPaths) return whole;
+
+  FrameBuffers part;
+  part.width = frame.height;
+  part.height = frame.width;
+  part.buffers["albedo"] = transposed(frame.get("diffuse_color"));
+  part.buffers["albedo"] = cleanedAux(base, "alb", part, next());
+  part.buffers["normal"] = transposed(clean.get("normal"));
+  LightPathSplit split = splitDiffuse(frame);  // each part freed once transposed
+  part.buffers["color"] = transposed(std::exchange(split.diffuse, Image()));
+  const torch::Tensor diffuse = runOidn(net, set, part, next()).image;
+  part.buffers["albedo"] = transposed(clean.get("albedo"));
+  part.buffers["color"] = transposed(std::exchange(split.rest, Image()));
+  const torch::Tensor rest = runOidn(net, set, part, next()).image;
+  whole.image = 0.5 * (whole.image + (diffuse + rest).transpose(2, 3));
+  return whole;
+}
+
+OidnPipeline::OidnPipeline(const ModelInfo& info, OidnBase base, OidnControlled controlled)
+    : info_(info), base_(std::move(base)), controlled_(std::move(controlled)) {
+  base_->eval();
+  base_->useChannelsLast();
+  if (controlled_) controlled_->eval();
+}
+
+std::vector<std::string> OidnPipeline::missingBuffers(
+    const std::vector<std::string>& available) const {
+  return base_->pick(available).second ? std::vector<std::string>{}
+                                       : std::vector<std::string>{"color"};
+}
+
+bool OidnPipeline::controlApplies(const std::vector<std::string>& available) const {
+  if (!controlled_) return false;
+  const auto& needed = oidnInputSet(info_.oidn.control.input_set).buffers;
+  return std::all_of(needed.begin(), needed.end(),
+                     [&](const std::string& name) { return contains(available, name); });
+}
+
+std::vector<std::string> OidnPipeline::usableBuffers(
+    const std::vector<std::string>& available) const {
+  std::vector<std::string> usable;
+  if (controlApplies(available)) {
+    usable = oidnInputSet(info_.oidn.control.input_set).buffers;
+    for (const auto& name : info_.oidn.control.extra_buffers)
+      if (contains(available, name)) usable.push_back(name);
+  } else if (const OidnInputSet* set = base_->pick(available).second) {
+    usable = set->buffers;
+  }
+  // The light-path split reads the diffuse passes (DenoiseOptions::lightPaths).
+  const auto& passes = diffusePassBuffers();
+  if (usable.size() >= 3 && base_->canPrefilter() &&
+      std::all_of(passes.begin(), passes.end(),
+                  [&](const std::string& name) { return contains(available, name); }))
+    for (const auto& name : passes)
+      if (!contains(usable, name)) usable.push_back(name);
+  return usable;
+}
+
+double OidnPipeline::bytesPerPixel() const {
+  double most = 0;
+  for (const auto& set : info_.oidn.input_sets)
+    most = std::max(most, oidnBytesPerPixel(base_->net(set)->config()));
+  return most;
+}
+
+// Steps 1 to 4; step 5 when the gate opens or the caller asks for it.
+DenoiseResult OidnPipeline::denoise(const FrameBuffers& frame,
+                                    const DenoiseOptions& options) const {
+  const bool control = controlApplies(frame.names());
+  if (control && options.control == ControlUse::Always) return denoiseWithControl(frame, options);
+  DenoiseResult result = denoiseWithBase(frame, options);
+  if (!control || options.control != ControlUse::Auto || !correlatedNoiseLeft(*result.noiseLeft))
+    return result;
+  DenoiseResult steered = denoiseWithControl(frame, options);
+  steered.noiseLeft = result.noiseLeft;
+  return steered;
+}
+
+DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
+                                            const DenoiseOptions& options) const {
+  c10::InferenceMode inference;
+  OidnRunOptions run;
+  run.device = options.device;
+  run.exposure = checkedExposure(options, frame);
+  run.tile = options.tile;
+  run.maxMemoryBytes = options.maxMemoryBytes;
+  run.progress = options.progress;
+  auto [net, set] = base_->pick(frame.names());
+  DenoiseResult result;
+  result.prefiltered = options.prefilter && base_->canPrefilter() && set->buffers.size() == 3;
+  result.lightPathsSplit = result.prefiltered && options.lightPaths && hasDiffusePasses(frame);
+  OidnRunResult out;
+  if (result.prefiltered) {
+    out = runOidnPrefiltered(base_, frame, run, result.lightPathsSplit);
+  } else {
+    net->to(options.device);
+    out = runOidn(net, *set, frame, run);
+  }
+  result.color = tensorToImage(out.image);
+  result.exposure = out.exposure;
+  result.steps = result.lightPathsSplit ? 6 : result.prefiltered ? 3 : 1;
+  result.tileSize = out.tileSize;
+  result.tileCount = out.tileCount;
+  result.buffersUsed = set->buffers;
+  if (result.lightPathsSplit)
+    result.buffersUsed.insert(result.buffersUsed.end(), diffusePassBuffers().begin(),
+                              diffusePassBuffers().end());
+  if (controlApplies(frame.names()) && options.control == ControlUse::Auto) {
+    // Compared where the base works: exposed and PU-encoded.
+    const torch::Tensor input = imageToTensor(frame.get("color")) * out.exposure;
+    result.noiseLeft = measureNoiseLeft(puEncode(input.nan_to_num(0.0).clamp_min(0.0)),
+                                        puEncode(out.image * out.exposure), frame);
+  }
+  return result;
+}
+
+DenoiseResult OidnPipeline::denoiseWithControl(const FrameBuffers& frame,
+                                               const DenoiseOptions& options) const {
+  c10::InferenceMode inference;
+  OidnControlled model = controlled_;
+  model->to(options.device);
+  const OidnControlConfig& config = info_.oidn.control;
+  const OidnInputSet& set = oidnInputSet(config.input_set);
+  const std::vector<double> sigmas =
+      config.diffusion ? options.sigmas.value_or(info_.oidn.sigmas) : std::vector<double>{};
+  checkSigmas(sigmas);
+  const int samples = sigmas.empty() ? 1 : options.samples;
+  const float requested = checkedExposure(options, frame);
+  const float exposure = requested > 0 ? requested : tonemap::oidnExposure(frame.get("color"));
+  const torch::Tensor exposures = torch::tensor({exposure});
+
+  OidnRunOptions run;
+  run.device = options.device;
+  run.exposure = exposure;
+  run.tile = options.tile;
+  OidnRunOptions auxRun = run;
+  auxRun.maxMemoryBytes = options.maxMemoryBytes;
+  // The control's encoder copy and the hint network run beside the base.
+  run.maxMemoryBytes = options.maxMemoryBytes / 1.5;
+  torch::Tensor noise;  // full-frame, so that overlapping tiles agree
+  run.network = [&](const torch::Tensor& x, const TileRect& r) {
+    // The hint is made on the CPU (the PU curve runs there) and moved.
+    auto [extras, present] = frameExtras(frame, config, r);
+    const std::vector<int64_t> pad = {0, x.size(3) - r.width, 0, x.size(2) - r.height};
+    extras = torch::constant_pad_nd(extras, pad, 0.0);
+    const auto features = model->steered()->encode(x);
+    if (!config.diffusion)
+      return model->decode(features, x,
+                           controlHint(config, extras, present, exposures).to(x.device()));
+    const torch::Tensor start = model->steered()->decode(features);
+    const torch::Tensor tileNoise =
+        torch::constant_pad_nd(noise.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width), pad, 0.0)
+            .to(x.device());
+    return refine(start, tileNoise, sigmas, [&](const torch::Tensor& state, double sigma) {
+      const torch::Tensor hint =
+          controlHint(config, extras, present, exposures, state.cpu(), torch::full({1}, sigma));
+      return model->decode(features, x, hint.to(x.device()));
+    });
+  };
+
+  // A module over the prefilter mode's network sees the guides cleaned, as it trained.
+  FrameBuffers cleaned;
+  if (set.cleanAux) cleaned = withCleanAux(base_, frame, auxRun, auxRun);
+  const FrameBuffers& input = set.cleanAux ? cleaned : frame;
+  torch::Tensor sum, sumSquares;
+  OidnRunResult out;
+  for (int k = 0; k < samples; ++k) {
+    auto generator = at::detail::createCPUGenerator(options.seed + uint64_t(k));
+    noise = torch::randn({1, 3, frame.height, frame.width}, generator);
+    if (options.progress) run.progress = [&, k](double f) { options.progress((k + f) / samples); };
+    OidnUNet steered = model->steered();
+    out = runOidn(steered, set, input, run);
+    sum = k == 0 ? out.image : sum + out.image;
+    if (samples > 1) sumSquares = k == 0 ? out.image.square() : sumSquares + out.image.square();
+  }
+  DenoiseResult result;
+  const double n = samples;
+  result.color = tensorToImage(sum / n);
+  if (samples > 1) {
+    const torch::Tensor mean = sum / n;
+    torch::Tensor variance = (sumSquares / n - mean * mean).clamp_min(0.0) * (n / (n - 1));
+    result.uncertainty = tensorToImage(variance.sqrt().mean(1, true));
+  }
+  result.exposure = out.exposure;
+  result.prefiltered = set.cleanAux;
+  result.steps = (set.cleanAux ? 3 : 1) + int64_t(sigmas.size());
+  result.steered = true;
+  result.tileSize = out.tileSize;
+  result.tileCount = out.tileCount;
+  result.buffersUsed = usableBuffers(frame.names());
+  return result;
+}
+
+}  // namespace dn
