@@ -61,6 +61,7 @@ int main(int argc, char** argv) {
     const std::vector<std::pair<std::string, ShareRule>> shares = {
         {"error", ShareRule::Error},
         {"magnitude", ShareRule::Magnitude},
+        {"relnoise", ShareRule::RelativeNoise},
         {"none", ShareRule::None}};
     for (const auto& variant : aparts) {
       PassDenoiseOptions options;

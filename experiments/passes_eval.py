@@ -185,7 +185,7 @@ def run_ours(args, path, out):
 
 def run_variants(args, path, folder):
     os.makedirs(folder, exist_ok=True)
-    if len(glob.glob(os.path.join(folder, "*.exr"))) < 9:  # 3 guides x 3 sharing rules
+    if len(glob.glob(os.path.join(folder, "*.exr"))) < 12:  # 3 guides x 4 sharing rules
         subprocess.run([os.path.join(args.bin, "passes_variants"), "--model",
                         os.path.join(ROOT, "models/default.dnm"), path, folder], check=True,
                        capture_output=True)
@@ -297,17 +297,23 @@ def main():
     ap.add_argument("--variants", type=int, nargs="*", default=[],
                     help="also bench/passes_variants' variants at these spp (e.g. 4)")
     ap.add_argument("--results", help="write the tables into this file's passes_eval section")
+    ap.add_argument("--table-only", action="store_true", help="the tables from WORK/rows.json of a run")
     args = ap.parse_args()
-    rows = evaluate(args)
-    os.makedirs(args.work, exist_ok=True)
-    with open(os.path.join(args.work, "rows.json"), "w") as f:
-        json.dump(rows, f, indent=1)
+    rows_path = os.path.join(args.work, "rows.json")
+    if args.table_only:
+        rows = json.load(open(rows_path))
+    else:
+        rows = evaluate(args)
+        os.makedirs(args.work, exist_ok=True)
+        with open(rows_path, "w") as f:
+            json.dump(rows, f, indent=1)
     methods = ["noisy", "ours", "oidn", "oidn_pre"]
     methods += sorted({r["method"] for r in rows if r["method"].startswith("v:")})
     lines = table(rows, methods)
     print("\n".join(lines))
     if args.results:
-        write_section(args.results, lines, " ".join(sys.argv[1:]))
+        argv = [a for a in sys.argv[1:] if a != "--table-only"]
+        write_section(args.results, lines, " ".join(argv))
 
 
 BEGIN, END = "<!-- passes_eval.py: begin -->", "<!-- passes_eval.py: end -->"

@@ -151,7 +151,7 @@ TEST_CASE("jointly denoised passes recombine to the beauty, each as good as OIDN
   CHECK(result.layers.size() == 10);
 
   // OIDN's prefilter mode on each pass alone, as this library runs it (the
-  // light passes: share None of the default; the colour passes: guided).
+  // light passes as the default denoises them; the colour passes guided).
   const LightPassImages noisy = readLightPasses(kBlender5, result.layout, frame);
   PassDenoiseOptions alone;
   alone.colorPasses = ColorPassDenoise::Guided;
@@ -169,14 +169,23 @@ TEST_CASE("jointly denoised passes recombine to the beauty, each as good as OIDN
   }
 }
 
-TEST_CASE("the sharing moves nothing when the parts already add up, and nothing into black") {
+TEST_CASE(
+    "the residual closes the rule; shared, nothing moves when the parts add up, or into black") {
   const OidnBase base = oidnBaseOfModel(kModel);
   const FrameBuffers frame = readFrame(kBlender5);
   const LightPassLayout layout = findLightPasses(channelNames(kBlender5), "ViewLayer.");
   const LightPassImages noisy = readLightPasses(kBlender5, layout, frame);
-  const PassDenoiseOptions options;
+  PassDenoiseOptions options;
   const LightPassImages apart = denoisePassesApart(base, frame, layout, noisy, options);
-  // Nothing to share: the beauty is the sum of the passes denoised apart.
+  // The default: every pass as denoised alone; the residual closes the rule.
+  const Image& beauty = frame.get("color");
+  const DenoisedPasses byDefault = shareToBeauty(layout, noisy, apart, beauty, options);
+  for (const auto& key : layout.usedKeys())
+    CHECK(byDefault.passes.at(key).pixels == apart.at(key).pixels);
+  CHECK(maxRelativeDifference(recombine(layout, byDefault.passes), beauty) < 1e-4);
+  // Shared by magnitude, with nothing to share: the beauty is the sum of the
+  // passes denoised apart.
+  options.share = ShareRule::Magnitude;
   const Image sum = recombine(layout, apart);
   const DenoisedPasses same = shareToBeauty(layout, noisy, apart, sum, options);
   for (const auto& [key, image] : apart) {

@@ -38,11 +38,19 @@ Image runNetwork(const OidnBase& base, const std::string& setName,
   return tensorToImage(runOidn(net, oidnInputSet(setName), input, run).image);
 }
 
-// An albedo-like buffer (the first-hit albedo or a colour pass) cleaned by
-// OIDN's albedo network, as its prefilter mode cleans the albedo.
-Image cleanAlbedoLike(const OidnBase& base, const Image& buffer, const OidnRunOptions& run) {
-  if (allZero(buffer)) return buffer;
-  return runNetwork(base, "alb", {{"albedo", buffer}}, run);
+// A colour pass cleaned by OIDN's albedo network, as its prefilter mode
+// cleans the albedo. The network takes [0, 1]; Cycles' colour passes reach 2
+// and more where closures add up (Principled's specular), so a pass above 1
+// is scaled into range and back.
+Image cleanColorPass(const OidnBase& base, const Image& pass, const OidnRunOptions& run) {
+  if (allZero(pass)) return pass;
+  float peak = 1.0f;
+  for (float v : pass.pixels) peak = std::max(peak, v);
+  Image scaled = pass;
+  for (float& v : scaled.pixels) v /= peak;
+  Image out = runNetwork(base, "alb", {{"albedo", scaled}}, run);
+  for (float& v : out.pixels) v *= peak;
+  return out;
 }
 
 // A light pass (HDR, non-negative) by the large network for clean guides.
@@ -105,7 +113,27 @@ std::vector<Part> partsOf(const LightPassLayout& layout, const LightPassImages& 
   return parts;
 }
 
-// The part's share weight at pixel value i, in beauty units squared.
+// |contribution| x its local relative noise, sqrt(mean err^2 / mean c^2) over
+// a wide box: a clean part (a visible background) takes little, a noisy one
+// in proportion to its size, and the weights are smooth.
+Image relativeNoiseWeights(const Part& part, const Image& x, const Image& d,
+                           const PassDenoiseOptions& options) {
+  Image err(x.width, x.height, 3), energy = err, magnitude = err;
+  for (std::size_t i = 0; i < err.pixels.size(); ++i) {
+    const float gain = part.color ? part.color->pixels[i] : 1.0f;
+    const float e = gain * (x.pixels[i] - d.pixels[i]), c = gain * d.pixels[i];
+    err.pixels[i] = e * e;
+    energy.pixels[i] = c * c;
+    magnitude.pixels[i] = std::abs(c);
+  }
+  err = boxMean(err, options.noiseRadius);
+  energy = boxMean(energy, options.noiseRadius);
+  for (std::size_t i = 0; i < err.pixels.size(); ++i)
+    magnitude.pixels[i] *= std::sqrt(err.pixels[i] / (energy.pixels[i] + 1e-12f));
+  return magnitude;
+}
+
+// The part's share weight at each value.
 Image shareWeights(const Part& part, const LightPassImages& noisy, const LightPassImages& denoised,
                    const PassDenoiseOptions& options) {
   const Image& x = noisy.at(part.key);
@@ -117,6 +145,7 @@ Image shareWeights(const Part& part, const LightPassImages& noisy, const LightPa
     w.pixels[i] = options.share == ShareRule::Magnitude ? std::abs(gain * d.pixels[i]) : err * err;
   }
   if (options.share == ShareRule::Error) w = boxMean(w, options.errorRadius);
+  if (options.share == ShareRule::RelativeNoise) w = relativeNoiseWeights(part, x, d, options);
   // No share where the part has no signal: black in the render and denoised,
   // or multiplied by a black colour.
   for (std::size_t i = 0; i < w.pixels.size(); ++i)
@@ -175,7 +204,7 @@ LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& fra
     if (!term.color.empty()) {
       const Image& color = noisy.at(term.color);
       denoised[term.color] = options.colorPasses == ColorPassDenoise::AlbedoNetwork
-                                 ? cleanAlbedoLike(base, color, run)
+                                 ? cleanColorPass(base, color, run)
                                  : denoiseLight(base, color, albedo, normal, run);
       if (options.guide == LightPassGuide::TermColor) guide = &denoised[term.color];
     }

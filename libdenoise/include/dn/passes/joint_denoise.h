@@ -2,11 +2,10 @@
 // denoised by OIDN's networks with the guide that suits it (colour passes by
 // the albedo network, as albedo-like buffers; light passes by the large
 // prefilter-mode network with the cleaned normal and albedo); then the
-// denoised beauty's difference from the sum of the denoised parts is shared
-// out, per pixel and channel, over the parts in proportion to each part's
-// magnitude there, so the renderer's rule (dn/passes/light_passes.h) gives
-// the denoised beauty back to float rounding, and a part takes only its own
-// share: none where it is black.
+// residual is set to the denoised beauty minus the sum of the others, so the
+// renderer's rule (dn/passes/light_passes.h) gives the denoised beauty back
+// to float rounding and no pass carries another's error or the beauty's.
+// ShareRule offers, for measurement, sharing that difference over the passes.
 #pragma once
 
 #include <map>
@@ -36,20 +35,24 @@ enum class ColorPassDenoise {
 };
 
 // How the beauty's difference from the sum of the parts is shared out.
-// Measured: by magnitude; by the estimated error it costs the passes up to
-// 4 dB (that estimate is itself noisy, and moves noise in).
+// Measured (docs/RESULTS.md#denoised-light-passes): sharing it over the light
+// passes gains up to 0.5 dB on some passes and loses up to 3.7 dB on others
+// (a clean Environment, Glossy Indirect): the difference carries the beauty's
+// own error. So by default no pass takes it: the residual does.
 enum class ShareRule {
-  Magnitude,  // by each part's denoised magnitude (in beauty units)
-  Error,      // by each part's estimated squared error (local mean of noisy - denoised)
-  None,       // not at all: the residual takes it (for measurement only)
+  None,           // the residual takes it: every pass stays as denoised alone
+  Magnitude,      // by each part's denoised magnitude (in beauty units)
+  RelativeNoise,  // by magnitude x the part's relative noise over a wide box
+  Error,          // by each part's estimated squared error (local mean of noisy - denoised)
 };
 
 struct PassDenoiseOptions {
   OidnRunOptions run;  // device, tiling and memory of every network run
   LightPassGuide guide = LightPassGuide::Albedo;
   ColorPassDenoise colorPasses = ColorPassDenoise::AlbedoNetwork;
-  ShareRule share = ShareRule::Magnitude;
-  int errorRadius = 2;  // box radius of the local mean of the squared error, pixels
+  ShareRule share = ShareRule::None;
+  int errorRadius = 2;  // ShareRule::Error: box radius of the local mean, pixels
+  int noiseRadius = 8;  // ShareRule::RelativeNoise: box radius, pixels
 };
 
 struct DenoisedPasses {
