@@ -1,9 +1,12 @@
 # Install rules: `cmake --install build --prefix /opt/dn` gives the tools, their
 # docs, the shipped models, the libraries with their headers, a CMake package
-# (find_package(DiffusionDenoise) -> dn::tonemap, dn::ocio, dn::metrics, dn::io,
-# dn::data, dn::denoise) and pkg-config files (dn-tonemap, dn-metrics, dn-io,
-# dn-denoise). Everything is relocatable: the package files find the prefix
-# from their own place.
+# (find_package(DiffusionDenoise) -> dn::tonemap, dn::ocio, dn::metrics,
+# dn::buffers, dn::io, dn::data, dn::infer, dn::denoise) and pkg-config files
+# (dn-tonemap, dn-metrics, dn-io, dn-denoise). Everything is relocatable: the
+# package files find the prefix from their own place. Built with
+# DN_WITH_OIIO=OFF: the libraries that build (dn::tonemap, dn::metrics,
+# dn::buffers, dn::infer), the CMake package and the models, no tools and no
+# pkg-config files (theirs require OpenColorIO and OpenImageIO).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
@@ -11,8 +14,14 @@ set(DN_INSTALL_DATADIR ${CMAKE_INSTALL_DATADIR}/${PROJECT_NAME})
 set(DN_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/DiffusionDenoise)
 
 # Library target -> name after the dn:: namespace.
-set(dn_exports dn_tonemap tonemap dn_tonemap_ocio ocio dn_metrics metrics dn_io io dn_data data)
+set(dn_exports dn_tonemap tonemap dn_metrics metrics dn_buffers buffers)
+if(DN_WITH_OIIO)
+  list(APPEND dn_exports dn_tonemap_ocio ocio dn_io io dn_data data)
+endif()
 if(DN_WITH_TORCH)
+  list(APPEND dn_exports dn_infer infer)
+endif()
+if(TARGET dn_core)
   list(APPEND dn_exports dn_core denoise)
 endif()
 set(dn_libraries)
@@ -44,8 +53,11 @@ install(FILES ${CMAKE_CURRENT_BINARY_DIR}/DiffusionDenoiseConfig.cmake
 # pkg-config: static libraries, so each file lists what linking needs. The
 # prefix is found from the .pc file's own folder.
 file(RELATIVE_PATH DN_PC_PREFIX "/${CMAKE_INSTALL_LIBDIR}/pkgconfig" "/")
-set(dn_pkgconfig dn-tonemap dn-metrics dn-io)
-if(DN_WITH_TORCH)
+set(dn_pkgconfig)
+if(DN_WITH_OIIO)
+  list(APPEND dn_pkgconfig dn-tonemap dn-metrics dn-io)
+endif()
+if(TARGET dn_core)
   # LibTorch has no .pc file: its include folders and libraries, from its CMake package.
   # (/usr/include stays out: -isystem on it breaks the C++ headers' #include_next;
   # libtorch itself is linked as needed or not, as its own torch_library target does.)
@@ -67,12 +79,17 @@ foreach(pc ${dn_pkgconfig})
 endforeach()
 
 # The tools, their docs, the shipped models and the built-in OCIO config.
-set(dn_tools dnmetrics)
-if(DN_WITH_TORCH)
+set(dn_tools)
+if(DN_WITH_OIIO)
+  list(APPEND dn_tools dnmetrics)
+endif()
+if(TARGET dn_core)
   list(APPEND dn_tools dndenoise dntrain dncleanse)
 endif()
 install(TARGETS ${dn_tools} RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 install(FILES README.md DESTINATION ${CMAKE_INSTALL_DOCDIR})
 install(DIRECTORY docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs)
 install(DIRECTORY models/ DESTINATION ${DN_INSTALL_DATADIR}/models)
-install(FILES libtonemap/ocio/srgb.ocio DESTINATION ${DN_INSTALL_DATADIR}/ocio)
+if(DN_WITH_OIIO)
+  install(FILES libtonemap/ocio/srgb.ocio DESTINATION ${DN_INSTALL_DATADIR}/ocio)
+endif()

@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "dn/infer/denoiser.h"
+#include "dn/infer/oidn_filter.h"
 #include "dn/io/buffer_io.h"
 #include "dn/metrics.h"
 #include "dn/nn/oidn_import.h"

@@ -1,0 +1,149 @@
+// Device placement (dn/infer/device.h and DenoiseOptions::device). Without a GPU
+// (CI, the CPU-only Debian LibTorch): CUDA is refused with a clear error before
+// any work, and the diffusion models refuse every device but the CPU. With one
+// (bench/gpu/check_cuda.sh): the OIDN base's modes on CUDA agree with the CPU.
+#include "doctest_torch.h"
+#include "tiny_models.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+
+#include "dn/infer/denoiser.h"
+#include "dn/infer/device.h"
+#include "dn/metrics.h"
+
+using namespace dn;
+
+namespace {
+
+const std::string kModel = std::string(DN_SOURCE_DIR) + "/models/default.dnm";
+
+Image randomImage(int w, int h, int c, double scale, uint64_t seed) {
+  auto generator = at::detail::createCPUGenerator(seed);
+  return tensorToImage(torch::rand({1, c, h, w}, generator, torch::kFloat) * scale);
+}
+
+// A render with albedo, normal and Cycles' diffuse passes; its size is not a
+// multiple of OIDN's alignment, so the padding is exercised too.
+FrameBuffers syntheticFrame(int width, int height) {
+  FrameBuffers frame;
+  frame.width = width;
+  frame.height = height;
+  frame.buffers["albedo"] = randomImage(width, height, 3, 0.9, 1);
+  frame.buffers["normal"] = randomImage(width, height, 3, 1.0, 2);
+  frame.buffers["diffuse_color"] = frame.buffers["albedo"];
+  frame.buffers["diffuse_direct"] = randomImage(width, height, 3, 2.0, 3);
+  frame.buffers["diffuse_indirect"] = randomImage(width, height, 3, 0.5, 4);
+  Image color = randomImage(width, height, 3, 1.0, 5);
+  for (std::size_t i = 0; i < color.pixels.size(); ++i)
+    color.pixels[i] +=
+        frame.buffers["albedo"].pixels[i] *
+        (frame.buffers["diffuse_direct"].pixels[i] + frame.buffers["diffuse_indirect"].pixels[i]);
+  frame.buffers["color"] = color;
+  return frame;
+}
+
+std::string messageOf(const std::function<void()>& action) {
+  try {
+    action();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+struct Mode {
+  const char* name;
+  DenoiseOptions options;
+};
+
+std::vector<Mode> modes() {
+  DenoiseOptions base, prefilter, split, control;
+  base.prefilter = false;
+  base.lightPaths = false;
+  base.control = prefilter.control = split.control = ControlUse::Never;
+  prefilter.lightPaths = false;
+  control.control = ControlUse::Always;
+  return {{"base", base}, {"prefilter", prefilter}, {"split", split}, {"control", control}};
+}
+
+}  // namespace
+
+TEST_CASE("device names: cpu, cuda and cuda:N; anything else is refused in one line") {
+  CHECK(parseDevice("cpu") == torch::Device(torch::kCPU));
+  for (const char* bad : {"gpu", "CPU", "cuda:x", "cuda:-1", "mps", ""}) {
+    CAPTURE(bad);
+    const std::string message = messageOf([&] { parseDevice(bad); });
+    CHECK(message.find("expected cpu, cuda or cuda:N") != std::string::npos);
+    CHECK(message.find('\n') == std::string::npos);
+  }
+  CHECK_THROWS_AS(checkDeviceAvailable(torch::Device(c10::DeviceType::Meta)),
+                  std::invalid_argument);
+}
+
+TEST_CASE("CUDA is refused where it is not available, and its index checked where it is") {
+  if (!torch::cuda::is_available()) {
+    const std::string message = messageOf([] { parseDevice("cuda"); });
+    CHECK(message ==
+          "device 'cuda': no CUDA device is available to this LibTorch build (a "
+          "CPU-only LibTorch, or no GPU or driver visible)");
+    CHECK_THROWS_AS(parseDevice("cuda:0"), std::invalid_argument);
+    // The denoiser itself does not fall back to the CPU either.
+    const Denoiser denoiser = Denoiser::fromFile(kModel);
+    DenoiseOptions options;
+    options.device = torch::Device(torch::kCUDA);
+    CHECK_THROWS(denoiser.denoise(syntheticFrame(40, 24), options));
+  } else {
+    const int64_t count = int64_t(torch::cuda::device_count());
+    MESSAGE(count << " CUDA device(s)");
+    CHECK(parseDevice("cuda") == torch::Device(torch::kCUDA));
+    CHECK(parseDevice("cuda:0") == torch::Device(torch::kCUDA, 0));
+    const std::string past = "cuda:" + std::to_string(count);
+    CHECK(messageOf([&] { parseDevice(past); }).find("CUDA device(s) present") !=
+          std::string::npos);
+  }
+}
+
+TEST_CASE("a diffusion model runs on the CPU only, and says so before any work") {
+  ModelInfo info;
+  info.base = tinyUNetConfig();
+  info.respacing = "4";
+  LoadedModel loaded{info, buildDenoiser(info)};
+  const Denoiser denoiser(loaded);
+  FrameBuffers frame;
+  frame.width = frame.height = 16;
+  frame.buffers["color"] = randomImage(16, 16, 3, 0.5, 9);
+  DenoiseOptions options;
+  options.device = torch::Device(torch::kCUDA);
+  CHECK(messageOf([&] { denoiser.denoise(frame, options); }).find("runs on the CPU only") !=
+        std::string::npos);
+  options.device = torch::Device(torch::kCPU);
+  const DenoiseResult result = denoiser.denoise(frame, options);
+  CHECK(result.color.sameShape(frame.get("color")));
+}
+
+TEST_CASE("the OIDN base's modes on the device asked for: the CPU exactly, CUDA to 60 dB") {
+  const Denoiser denoiser = Denoiser::fromFile(kModel);
+  const FrameBuffers frame = syntheticFrame(72, 40);
+  const bool cuda = torch::cuda::is_available();
+  // Strict float32 on the GPU: TF32 convolutions (LibTorch's default) are a
+  // speed choice for the caller, not what this test compares.
+  if (cuda) at::globalContext().setAllowTF32CuDNN(false);
+  for (const Mode& mode : modes()) {
+    CAPTURE(mode.name);
+    DenoiseOptions onCpu = mode.options;
+    onCpu.device = torch::Device(torch::kCPU);
+    const DenoiseResult reference = denoiser.denoise(frame, onCpu);
+    CHECK(reference.color.pixels == denoiser.denoise(frame, mode.options).color.pixels);
+    if (std::string(mode.name) != "control")
+      CHECK(reference.prefiltered == (std::string(mode.name) != "base"));
+    CHECK(reference.lightPathsSplit == (std::string(mode.name) == "split"));
+    CHECK(reference.steered == (std::string(mode.name) == "control"));
+    if (!cuda) continue;
+    DenoiseOptions onGpu = mode.options;
+    onGpu.device = torch::Device(torch::kCUDA);
+    const DenoiseResult gpu = denoiser.denoise(frame, onGpu);
+    const double psnr = metrics::compare(reference.color, gpu.color, {"psnr"}).values.at("psnr");
+    MESSAGE(mode.name << ": CUDA against CPU " << psnr << " dB");
+    CHECK(psnr >= 60.0);
+  }
+}
