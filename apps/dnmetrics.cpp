@@ -17,6 +17,7 @@
 #include "common/app.h"
 #include "common/cli.h"
 #include "common/progress.h"
+#include "common/sequence.h"
 #include "dn/flip.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
@@ -30,8 +31,13 @@ namespace {
 
 const char* kUsage = R"(usage: dnmetrics [options] REF TEST...
        dnmetrics [options] REFDIR TESTDIR
+       dnmetrics [options] REF.#.exr TEST.#.exr   (sequences; REF may be one file for all)
 
 Compares each TEST image with REF (or the same-named files of two folders).
+Sequences get every frame's metrics and the flicker of the error, mean
+|e_t - e_(t-1)| with e = R(TEST) - R(REF) per pixel and channel in the Reinhard
+space R (for a frame and the one before it; on a locked-off shot with one
+shared REF it is the frame-to-frame change of the result itself).
 L1, MSE and SMAPE use radiance clamped to [0, 6]; relMSE linear radiance;
 PSNR and SSIM Reinhard-tonemapped images; flip is LDR-FLIP of the Reinhard
 images encoded as sRGB; hdrflip is HDR-FLIP of the linear images.
@@ -180,8 +186,23 @@ bool isImageFile(const fs::path& p) {
   return fs::is_regular_file(p) && exts.count(ext);
 }
 
+// (reference, test, display name) triples for frame sequences: TEST a
+// pattern, REF a pattern of the same frame numbers or one file for them all.
+std::vector<std::array<std::string, 3>> pairUpSequence(const Options& o) {
+  std::vector<std::array<std::string, 3>> pairs;
+  const bool refPattern = cli::isFramePattern(o.inputs[0]);
+  for (const auto& [number, test] : cli::sequenceFrames(o.inputs[1], "", false, "dnmetrics"))
+    pairs.push_back({refPattern ? cli::frameFile(o.inputs[0], number) : o.inputs[0], test, test});
+  return pairs;
+}
+
+bool isSequence(const Options& o) {
+  return o.inputs.size() == 2 && cli::isFramePattern(o.inputs[1]);
+}
+
 // (reference, test, display name) triples for both modes.
 std::vector<std::array<std::string, 3>> pairUp(const Options& o) {
+  if (isSequence(o)) return pairUpSequence(o);
   std::vector<std::array<std::string, 3>> pairs;
   if (!fs::is_directory(o.inputs[0])) {
     for (std::size_t i = 1; i < o.inputs.size(); ++i) {
@@ -216,13 +237,19 @@ void writeHeatmap(const std::string& path, const metrics::Comparison& c) {
   writeImage(path, heat, false);
 }
 
+// Over the rows where the metric is defined (a sequence's first frame has no flicker).
 std::pair<double, double> meanAndStd(const std::vector<Row>& rows, const std::string& metric) {
   double sum = 0, sq = 0;
-  for (const auto& r : rows) sum += r.values.at(metric);
-  double mean = sum / rows.size();
-  for (const auto& r : rows) sq += (r.values.at(metric) - mean) * (r.values.at(metric) - mean);
+  std::size_t n = 0;
+  for (const auto& r : rows)
+    if (!std::isnan(r.values.at(metric))) sum += r.values.at(metric), ++n;
+  if (n == 0) return {NAN, NAN};
+  double mean = sum / n;
+  for (const auto& r : rows)
+    if (!std::isnan(r.values.at(metric)))
+      sq += (r.values.at(metric) - mean) * (r.values.at(metric) - mean);
   if (!std::isfinite(mean)) return {mean, NAN};
-  return {mean, rows.size() > 1 ? std::sqrt(sq / (rows.size() - 1)) : 0.0};
+  return {mean, n > 1 ? std::sqrt(sq / (n - 1)) : 0.0};
 }
 
 // JSON has no infinity: identical images' PSNR is the string "inf" (and an
@@ -326,7 +353,8 @@ int run(const Options& o, int argc, char** argv) {
   cli::setToolProvenance("dnmetrics", argc, argv);
   std::vector<Row> rows;
   std::string loadedRef;  // a shared reference is read once
-  Image ref;
+  Image ref, previousRef, previousTest;
+  const bool sequence = isSequence(o);
   std::optional<cli::Progress> progress;
   if (o.verbose) progress.emplace(stderr);
   for (const auto& [refPath, testPath, name] : pairs) {
@@ -344,10 +372,19 @@ int run(const Options& o, int argc, char** argv) {
                                 test.width, test.height, refPath, ref.width, ref.height));
     auto comparison = metrics::compare(ref, test, o.metrics);
     if (!o.heatmap.empty()) writeHeatmap(o.heatmap, comparison);
+    if (sequence) {
+      if (!previousTest.empty() && !previousTest.sameShape(test))
+        throw IoError(testPath + ": not the size of the frame before it");
+      comparison.values["flicker"] =
+          previousTest.empty() ? NAN : metrics::flicker(previousRef, previousTest, ref, test);
+      previousRef = ref, previousTest = std::move(test);
+    }
     rows.push_back({name, comparison.values});
   }
   if (progress) progress->finish();
-  print(o, rows);
+  Options shown = o;
+  if (sequence) shown.metrics.push_back("flicker");
+  print(shown, rows);
 
   int status = cli::kExitOk;
   for (const auto& [metric, limit] : o.maxErrors)

@@ -16,7 +16,7 @@ set(DN_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/DiffusionDenoise)
 # Library target -> name after the dn:: namespace.
 set(dn_exports dn_tonemap tonemap dn_metrics metrics dn_buffers buffers)
 if(DN_WITH_OIIO)
-  list(APPEND dn_exports dn_tonemap_ocio ocio dn_io io dn_data data)
+  list(APPEND dn_exports dn_tonemap_ocio ocio dn_io io dn_data data dn_motion motion)
 endif()
 if(DN_WITH_TORCH)
   list(APPEND dn_exports dn_infer infer)

@@ -550,12 +550,19 @@ def limitations(run):
     return lines + [""]
 
 
+# Sections other scripts wrote into the old report, each with its own command.
+KEPT_SECTIONS = ((SECTION_BEGIN, SECTION_END),
+                 ("<!-- temporal_eval.py: begin -->", "<!-- temporal_eval.py: end -->"))
+
+
 def kept_section(path):
-    """The section that eval_sets.py wrote into the old report, if any (it has its own command)."""
+    """The sections that eval_sets.py and temporal_eval.py wrote into the old report, if any."""
     old = open(path).read() if os.path.exists(path) else ""
-    if SECTION_BEGIN not in old or SECTION_END not in old:
-        return []
-    return ["", SECTION_BEGIN + old.split(SECTION_BEGIN, 1)[1].split(SECTION_END, 1)[0] + SECTION_END]
+    kept = []
+    for begin, end in KEPT_SECTIONS:
+        if begin in old and end in old:
+            kept += ["", begin + old.split(begin, 1)[1].split(end, 1)[0] + end]
+    return kept
 
 
 def main():

@@ -144,6 +144,25 @@ double psnr(const Image& reference, const Image& test) {
   return m > 0.0 ? 10.0 * std::log10(1.0 / m) : INFINITY;
 }
 
+double flicker(const Image& previousReference, const Image& previousTest, const Image& reference,
+               const Image& test) {
+  requireComparable(reference, test);
+  requireComparable(previousReference, previousTest);
+  requireComparable(reference, previousReference);
+  auto mapped = [](float v) { return double(std::min(tonemap::reinhard(v), 1.0f)); };
+  double sum = 0.0;
+  for (std::size_t i = 0; i < reference.pixelCount(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const std::size_t now = i * reference.channels + c,
+                        before = i * previousReference.channels + c;
+      const double e = mapped(test.pixels[i * test.channels + c]) - mapped(reference.pixels[now]);
+      const double ePrevious = mapped(previousTest.pixels[i * previousTest.channels + c]) -
+                               mapped(previousReference.pixels[before]);
+      sum += std::abs(e - ePrevious);
+    }
+  return sum / (3.0 * reference.pixelCount());
+}
+
 double ssim(const Image& reference, const Image& test) {
   requireComparable(reference, test);
   if (reference.width < 11 || reference.height < 11)

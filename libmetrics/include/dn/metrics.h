@@ -23,6 +23,13 @@ double ssim(const Image& reference, const Image& test);    // Reinhard, 11x11 Ga
 // with |.|_1 the mean absolute value (as the SMAPE training loss), so eps is size-independent.
 double smape(const Image& reference, const Image& test);
 
+// Temporal flicker of the error between two consecutive frames: the mean over
+// pixels and channels of |e_t - e_(t-1)|, e = R(test) - R(reference) with R
+// Reinhard's tonemap clipped to [0, 1] (as PSNR sees images). With one shared
+// reference (a locked-off shot) it is the mean |R(test_t) - R(test_(t-1))|.
+double flicker(const Image& previousReference, const Image& previousTest, const Image& reference,
+               const Image& test);
+
 // Reinhard tonemap then sRGB encoding: the LDR image LDR-FLIP and previews see.
 Image reinhardSrgb(const Image& linear);
 

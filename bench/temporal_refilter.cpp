@@ -1,0 +1,73 @@
+// The temporal filter of `dndenoise --temporal on`, run over frames already
+// denoised alone (`dndenoise --temporal off --float`), so that its settings
+// can be measured in seconds instead of re-denoising every frame. The same
+// code path as dndenoise (apps/common/temporal_sequence.cpp), with the
+// "denoiser" reading the frame's stored result.
+//   temporal_refilter NOISY.#.exr ALONE.#.exr -o OUT.#.exr [--window N]
+//                     [--colour LOW,HIGH] [--frames RANGE]
+#include <fmt/format.h>
+
+#include <cstdio>
+#include <string>
+
+#include "common/cli.h"
+#include "common/sequence.h"
+#include "common/temporal_sequence.h"
+
+using namespace dn;
+
+int main(int argc, char** argv) {
+  try {
+    cli::Args args(argc, argv);
+    std::vector<std::string> positional;
+    std::string output, frames;
+    cli::TemporalSettings settings;
+    settings.enabled = true;
+    while (!args.done()) {
+      if (args.flag("-o")) {
+        output = args.value("-o");
+      } else if (args.flag("--window")) {
+        settings.radius = args.intValue("--window", 1, 8);
+      } else if (args.flag("--colour")) {
+        const auto values = cli::splitList(args.value("--colour"));
+        if (values.size() != 2) throw cli::UsageError("--colour LOW,HIGH");
+        settings.filter.colourLow = cli::Args::toDouble("--colour", values[0]);
+        settings.filter.colourHigh = cli::Args::toDouble("--colour", values[1]);
+      } else if (args.flag("--frames")) {
+        frames = args.value("--frames");
+      } else {
+        positional.push_back(args.positional());
+      }
+    }
+    if (positional.size() != 2 || output.empty())
+      throw cli::UsageError("usage: temporal_refilter NOISY.#.exr ALONE.#.exr -o OUT.#.exr");
+    const std::string noisy = positional[0], alone = positional[1];
+    std::vector<std::string> inputs;
+    std::vector<int> numbers;
+    for (const auto& [n, path] : cli::sequenceFrames(noisy, frames, false, "temporal_refilter"))
+      inputs.push_back(path), numbers.push_back(n);
+    std::string why;
+    auto sequence = cli::TemporalSequence::plan({noisy}, inputs, settings, why);
+    if (!sequence) throw IoError(noisy + ": " + (why.empty() ? "not a sequence" : why));
+    const cli::TemporalSequence::Read read = [](const std::string& path) {
+      ReadOptions only;
+      only.only = {"color"};
+      return readFrame(path, only);
+    };
+    const cli::TemporalSequence::Denoise stored = [&](const std::string& path,
+                                                      const FrameBuffers&) {
+      DenoiseResult result;
+      result.color = readImage(cli::frameFile(alone, *cli::frameNumberOf(noisy, path)), 3);
+      return result;
+    };
+    for (std::size_t i = 0; i < inputs.size(); ++i) {
+      const DenoiseResult result = sequence->denoise(inputs[i], read(inputs[i]), read, stored);
+      writeImage(cli::frameFile(output, numbers[i]), result.color, false, {"R", "G", "B"});
+      fmt::print(stderr, "temporal_refilter: {}: {}\n", inputs[i], sequence->report());
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "temporal_refilter: {}\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,148 @@
+#!/usr/bin/env python3
+"""Temporal denoising against frame-by-frame denoising, on rendered sequences.
+
+  python3 experiments/temporal_eval.py --data /work/data/temporal --out /work/data/temporal/eval \
+      --dndenoise build/bin/dndenoise --dnmetrics build/bin/dnmetrics \
+      --refilter build/bin/temporal_refilter --model models/default.dnm \
+      --scenes still object pan light --spp 4 16 [--window 4] [--threads 2] \
+      [--extra accumulate on]
+
+For each scene folder (experiments/render_sequences.py: spp<N>.<frame>.exr, and
+ref.<frame>.exr or one ref.exr for a locked-off shot; at most 8 frames) and
+each --spp, denoises the sequence these ways:
+  fbf        dndenoise --temporal off --float (the default model, every frame alone)
+  temporal   the temporal filter of dndenoise --temporal on over the fbf frames
+             (bench/temporal_refilter: the same code, without denoising again)
+  oidn       OIDN 2.x per frame, its usual call (experiments/oidn_denoise.py)
+  prefilter  OIDN's prefilter mode per frame (oidn_denoise.py --prefilter)
+  --extra M  dndenoise --temporal M --float in full (on: to check that it writes
+             what temporal_refilter gives, and its time against fbf's)
+and scores each with dnmetrics (PSNR, FLIP per frame, flicker of the error).
+Prints a Markdown table (means over frames; the worst per-frame PSNR change
+against fbf; wall time of the dndenoise runs) and writes OUT/results.json.
+Existing outputs are reused unless --force.
+"""
+
+import argparse
+import glob
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+METHODS = ("fbf", "temporal", "oidn", "prefilter")
+
+
+def run(cmd, log=None):
+    start = time.time()
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.exit(f"temporal_eval: {' '.join(cmd)} failed:\n{result.stderr}")
+    if log:
+        with open(log, "w") as f:
+            f.write(result.stderr)
+    return time.time() - start, result.stdout
+
+
+def frames_of(folder, spp):
+    return sorted(glob.glob(os.path.join(folder, f"spp{spp}.[0-9][0-9][0-9][0-9].exr")))[:8]
+
+
+def denoise(args, scene, spp, method, out):
+    folder = os.path.join(args.data, scene)
+    pattern = os.path.join(folder, f"spp{spp}.#.exr")
+    frames = frames_of(folder, spp)
+    last = int(frames[-1][-8:-4])
+    target = os.path.join(out, method)
+    os.makedirs(target, exist_ok=True)
+    done = glob.glob(os.path.join(target, "*.exr"))
+    threads = ["--threads", str(args.threads)] if args.threads else []
+    if method == "temporal":  # always: it is quick, and its settings are what is measured
+        cmd = [args.refilter, pattern, os.path.join(out, "fbf", f"spp{spp}.#.exr"), "-o",
+               os.path.join(target, f"spp{spp}.#.exr"), "--window", str(args.window),
+               "--frames", f"1-{last}"]
+        if args.colour:
+            cmd += ["--colour", args.colour]
+        return run(cmd, log=os.path.join(out, method + ".log"))[0]
+    if done and not args.force and len(done) == len(frames):
+        return None
+    if method in ("oidn", "prefilter"):
+        cmd = [sys.executable, os.path.join(HERE, "oidn_denoise.py"), *frames, "-o", target + "/"] + threads
+        return run(cmd + (["--prefilter"] if method == "prefilter" else []))[0]
+    mode = "off" if method == "fbf" else method
+    cmd = [args.dndenoise, "--model", args.model, pattern, "-o", os.path.join(target, f"spp{spp}.#.exr"),
+           "--rgb-only", "--float", "--temporal", mode, "--window", str(args.window), "-v",
+           "--frames", f"1-{last}"] + threads
+    return run(cmd, log=os.path.join(out, method + ".log"))[0]
+
+
+def score(args, scene, spp, method, out):
+    folder = os.path.join(args.data, scene)
+    shared = os.path.join(folder, "ref.exr")
+    ref = shared if os.path.exists(shared) else os.path.join(folder, "ref.#.exr")
+    test = os.path.join(out, method, f"spp{spp}.#.exr")
+    _, stdout = run([args.dnmetrics, ref, test, "--metrics", "psnr,flip", "--format", "json"])
+    data = json.loads(stdout)
+    return {"psnr": [r["psnr"] for r in data["results"]], "flip": [r["flip"] for r in data["results"]],
+            "flicker": [r["flicker"] for r in data["results"][1:]]}
+
+
+def history_shares(log):
+    with open(log) as f:
+        return [float(m) for m in re.findall(r"(\d+)% from history", f.read())]
+
+
+def mean(values):
+    return sum(values) / len(values)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--dndenoise", required=True)
+    ap.add_argument("--dnmetrics", required=True)
+    ap.add_argument("--refilter", required=True, help="bench/temporal_refilter")
+    ap.add_argument("--model", required=True)
+    ap.add_argument("--colour", default="", help="LOW,HIGH: the colour test's thresholds")
+    ap.add_argument("--extra", nargs="*", default=[], choices=["on", "accumulate"])
+    ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
+    ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
+    ap.add_argument("--window", type=int, default=4)
+    ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--force", action="store_true")
+    args = ap.parse_args()
+
+    results = {}
+    print("| scene | spp | method | PSNR dB | FLIP | flicker | note |")
+    print("|---|---|---|---|---|---|---|")
+    for scene in args.scenes:
+        for spp in args.spp:
+            out = os.path.join(args.out, scene, f"spp{spp}")
+            os.makedirs(out, exist_ok=True)
+            methods = list(METHODS) + args.extra
+            times = {m: denoise(args, scene, spp, m, out) for m in methods}
+            scores = {m: score(args, scene, spp, m, out) for m in methods}
+            worst = {m: min(t - f for t, f in zip(scores[m]["psnr"], scores["fbf"]["psnr"])) for m in methods}
+            shares = {m: history_shares(os.path.join(out, m + ".log")) for m in methods
+                      if m not in ("fbf", "oidn", "prefilter")}
+            results[f"{scene}/spp{spp}"] = {"scores": scores, "seconds": times,
+                                           "worst_frame_delta_db": worst, "history_percent": shares}
+            for m in methods:
+                s = scores[m]
+                note = ""
+                if m in shares:
+                    note = f"worst frame {worst[m]:+.2f} dB vs fbf; {mean(shares[m]):.0f}% from history"
+                    if times.get("fbf") and times.get(m) and m != "temporal":
+                        note += f"; time x{times[m] / times['fbf']:.2f} of fbf"
+                print(f"| {scene} | {spp} | {m} | {mean(s['psnr']):.2f} | {mean(s['flip']):.4f} | "
+                      f"{mean(s['flicker']):.5f} | {note} |", flush=True)
+    with open(os.path.join(args.out, "results.json"), "w") as f:
+        json.dump(results, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,62 @@
+// Bringing a neighbouring frame into the current one along the motion vectors,
+// and deciding per pixel whether what arrives can be trusted.
+#pragma once
+
+#include <vector>
+
+#include "dn/image.h"
+#include "dn/motion/motion.h"
+
+namespace dn::motion {
+
+// The nearly noise-free first-hit features that tell whether two pixels see the
+// same surface. Any may be empty (that test is then skipped).
+struct Guides {
+  Image albedo;  // 3 channels
+  Image normal;  // 3 channels, world space
+  Image depth;   // 1 channel, camera distance
+};
+
+// The rejection thresholds (docs/dndenoise.md, "Temporal denoising").
+struct TrustOptions {
+  double depthRelative = 0.05;   // |z' - z| / z beyond this: another surface
+  double normalCosine = 0.9;     // n' . n below this: another surface or orientation
+  double albedoAbsolute = 0.08;  // per channel, plus albedoRelative x the larger
+  double albedoRelative = 0.25;
+  double roundTripPixels = 1.0;  // the neighbour's motion back must land within this
+  double minCoverage = 0.5;      // least bilinear weight of the accepted taps
+  // The nearest pixel only (trust 0 or 1): noisy samples keep their noise
+  // independent, which a bilinear blend would correlate.
+  bool nearest = false;
+};
+
+// One frame as reprojection sees it: its guides and its motion.
+struct FrameGeometry {
+  const Guides* guides = nullptr;
+  const MotionField* motion = nullptr;
+};
+
+// Where each pixel of frame `chain[0]` is in frame `chain.back()`, following
+// the motion hop by hop (chain[i] -> chain[i+1] are consecutive frames, forward
+// in time when `forward`). A 2-channel image of positions (pixel centres at
+// integers); NaN where the surface left the screen or a hop's round trip
+// failed (a disocclusion: the neighbour's own motion back does not return).
+Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
+                     const TrustOptions& options = {});
+
+// A neighbour's image resampled at `positions` (bilinear over the taps whose
+// guides match the current frame's at the destination pixel), and the trust of
+// each pixel in [0, 1]: 0 off-screen, disoccluded, or another surface; else
+// the share of bilinear weight that matched (below minCoverage: 0).
+struct Reprojected {
+  Image image;  // channels of `source`; zeros where trust is 0
+  Image trust;  // 1 channel
+};
+Reprojected reproject(const Image& source, const Guides& sourceGuides, const Image& positions,
+                      const Guides& currentGuides, const TrustOptions& options = {});
+
+// Nearest-pixel resampling (no filtering: noise stays uncorrelated), for the
+// repeated-noise test. Zeros where positions are NaN.
+Image reprojectNearest(const Image& source, const Image& positions);
+
+}  // namespace dn::motion

@@ -1,0 +1,78 @@
+// Filtering denoised frames over time: each frame's result averaged with its
+// neighbours' results brought into it along the motion, where they are trusted.
+// Each frame's leftover error (blotches) changes with the noise seed, so the
+// average of trusted neighbours removes part of it and most of the flicker.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "dn/image.h"
+#include "dn/io/buffers.h"
+#include "dn/motion/motion.h"
+#include "dn/motion/reproject.h"
+
+namespace dn::temporal {
+
+// One frame of the window: the denoised result, the noisy render (for the
+// repeated-noise test), its guides and its motion.
+struct WindowFrame {
+  Image denoised;  // 3 channels, linear
+  Image noisy;     // 3 channels, linear
+  motion::Guides guides;
+  motion::MotionField motion;
+};
+
+struct TemporalOptions {
+  int radius = 4;  // neighbours on each side
+  motion::TrustOptions trust;
+  // A neighbour whose reprojected result differs from the frame's (in a
+  // Reinhard space, relative to the render's local noise level) by more than
+  // this many robust spreads of such differences is a moving shadow or
+  // highlight: its weight falls linearly to 0 between colourLow and colourHigh.
+  double colourLow = 2.5;
+  double colourHigh = 5.0;
+  // The spread is at most this: on the locked-off and moving-camera shots of
+  // experiments/render_sequences.py it is 0.16-0.20 at 4 spp and 0.21-0.26 at
+  // 16 spp; a lamp moving across the room raises it to 1-7.
+  double maxSpread = 0.3;
+  // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
+  // must agree within their standard error: the weight falls from 1 at
+  // lightLow standard errors to 0 at lightHigh (a change of light).
+  int lightBox = 5;
+  double lightLow = 2.0;
+  double lightHigh = 4.0;
+  // Noise residuals correlated above this with the frame's: the neighbour
+  // repeats the frame's noise (a fixed seed on a still camera) and adds nothing.
+  double repeatedNoiseCorrelation = 0.5;
+};
+
+// What one frame took from its neighbours, for -v.
+struct TemporalStats {
+  double historyShare = 0.0;    // mean over pixels of the neighbours' share of the weight
+  int neighbours = 0;           // neighbours available in the window
+  int repeatedNoise = 0;        // of them, rejected for repeating the frame's noise
+  std::vector<double> trusted;  // per neighbour: share of pixels it contributed to
+};
+
+struct TemporalResult {
+  Image color;
+  TemporalStats stats;
+};
+
+// The result for window[centre]: `window` holds consecutive frames (nullptr
+// where a frame is missing, which ends the chain on that side), window[centre]
+// the frame itself. Deterministic: depends only on the frames given.
+TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
+                           const TemporalOptions& options = {});
+
+// Accumulation before denoising (the other candidate): every buffer of
+// inputs[centre] averaged with the neighbours' (nearest pixel, so the noise
+// stays independent; trusted by the screen, round-trip and guide checks; no
+// colour test, the inputs being noisy). `window` gives each frame's guides and
+// motion (denoised may be empty). stats.historyShare as for filterFrame.
+FrameBuffers accumulateInputs(const std::vector<const FrameBuffers*>& inputs,
+                              const std::vector<const WindowFrame*>& window, std::size_t centre,
+                              const TemporalOptions& options, TemporalStats& stats);
+
+}  // namespace dn::temporal

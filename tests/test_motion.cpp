@@ -1,0 +1,333 @@
+// Motion vectors: each renderer convention's direction and sign, checked on
+// renders of a known camera move (testdata/motion, made by
+// experiments/render_sequences.py --scene convention); reprojection and the
+// temporal filter on synthetic frames with known shifts and an occluder.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+#include "dn/io/buffer_io.h"
+#include "dn/motion/motion.h"
+#include "dn/motion/reproject.h"
+#include "dn/temporal/temporal_filter.h"
+
+using namespace dn;
+using namespace dn::motion;
+
+namespace {
+
+const std::string kMotionDir = std::string(DN_TESTDATA) + "/motion/";
+
+// The camera of the convention scene moves (+3, +2) px from frame 1 to 2 and
+// (+6, +4) px from 2 to 3 (x right, y up in the view), so the surface moves
+// the other way on screen. In image coordinates (rows run down) the surface at
+// a pixel of frame 2 is at (+3, -2) from it in frame 1 and at (-6, +4) in frame 3.
+constexpr float kToPrevious[2] = {3.0f, -2.0f};
+constexpr float kToNext[2] = {-6.0f, 4.0f};
+
+// Mean |a - b| over pixels where trust > 0, and the share of such pixels.
+std::pair<double, double> trustedError(const Image& a, const Image& b, const Image& trust) {
+  double sum = 0.0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < trust.pixels.size(); ++i) {
+    if (trust.pixels[i] <= 0.0f) continue;
+    for (int c = 0; c < a.channels; ++c)
+      sum += std::abs(a.pixels[i * a.channels + c] - b.pixels[i * b.channels + c]);
+    ++n;
+  }
+  return {n ? sum / (n * a.channels) : 1e9, double(n) / trust.pixels.size()};
+}
+
+void checkConvention(const std::string& dir) {
+  const std::string middle = kMotionDir + dir + "/spp4.0002.exr";
+  const FrameBuffers f2 = readFrame(middle);
+  auto field = readMotion(middle, f2.width, f2.height);
+  REQUIRE(field);
+  CHECK(field->source.find("Blender") != std::string::npos);
+  for (std::size_t i = 0; i < field->toNext.pixelCount(); ++i) {
+    REQUIRE(field->toPrevious.pixels[2 * i] == doctest::Approx(kToPrevious[0]).epsilon(0.01));
+    REQUIRE(field->toPrevious.pixels[2 * i + 1] == doctest::Approx(kToPrevious[1]).epsilon(0.01));
+    REQUIRE(field->toNext.pixels[2 * i] == doctest::Approx(kToNext[0]).epsilon(0.01));
+    REQUIRE(field->toNext.pixels[2 * i + 1] == doctest::Approx(kToNext[1]).epsilon(0.01));
+  }
+  // Independent of the numbers above: the neighbours' albedo (a texture),
+  // brought along the decoded motion, matches this frame's; along the
+  // opposite sign it does not.
+  for (int side : {-1, 1}) {
+    const std::string other = kMotionDir + dir + (side < 0 ? "/spp4.0001.exr" : "/spp4.0003.exr");
+    const FrameBuffers neighbour = readFrame(other);
+    auto neighbourField = readMotion(other, f2.width, f2.height);
+    REQUIRE(neighbourField);
+    const Guides none;
+    const Image positions = chainPositions({{&none, &*field}, {&none, &*neighbourField}}, side > 0);
+    const Reprojected right = reproject(neighbour.get("albedo"), none, positions, none);
+    const auto [error, covered] = trustedError(right.image, f2.get("albedo"), right.trust);
+    CHECK(covered > 0.7);
+    CHECK(error < 0.01);
+
+    MotionField flipped = *field;
+    for (Image* im : {&flipped.toPrevious, &flipped.toNext})
+      for (float& v : im->pixels) v = -v;
+    MotionField flippedNeighbour = *neighbourField;
+    for (Image* im : {&flippedNeighbour.toPrevious, &flippedNeighbour.toNext})
+      for (float& v : im->pixels) v = -v;
+    const Image wrongPositions =
+        chainPositions({{&none, &flipped}, {&none, &flippedNeighbour}}, side > 0);
+    const Reprojected wrong = reproject(neighbour.get("albedo"), none, wrongPositions, none);
+    CHECK(trustedError(wrong.image, f2.get("albedo"), wrong.trust).first > 5 * error);
+  }
+}
+
+// A frame of a synthetic shot: a textured background (depth 10) moving by
+// `shift` px per frame, and optionally a square occluder (depth 2) at `box`.
+struct Synthetic {
+  Image color, albedo, normal, depth;
+};
+
+float texture(double x, double y) {
+  return 0.3f + 0.2f * std::sin(0.7 * x) * std::cos(0.45 * y) + 0.1f * std::sin(0.13 * (x + 2 * y));
+}
+
+Synthetic makeFrame(int w, int h, double ox, double oy, int boxX = -100, int boxY = -100,
+                    int boxSize = 0) {
+  Synthetic f{Image(w, h, 3), Image(w, h, 3), Image(w, h, 3), Image(w, h, 1)};
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool inBox = x >= boxX && x < boxX + boxSize && y >= boxY && y < boxY + boxSize;
+      const float t = inBox ? 0.9f : texture(x + ox, y + oy);
+      for (int c = 0; c < 3; ++c) {
+        f.color.at(x, y, c) = t * (1.0f + 0.1f * c);
+        f.albedo.at(x, y, c) = inBox ? 0.9f : 0.5f;
+      }
+      f.normal.at(x, y, 2) = inBox ? 1.0f : 0.0f;
+      f.normal.at(x, y, 1) = inBox ? 0.0f : 1.0f;
+      f.depth.at(x, y, 0) = inBox ? 2.0f : 10.0f;
+    }
+  return f;
+}
+
+MotionField constantMotion(int w, int h, float px, float py, float nx, float ny) {
+  MotionField m{Image(w, h, 2), Image(w, h, 2), "synthetic", false};
+  for (std::size_t i = 0; i < m.toNext.pixelCount(); ++i) {
+    m.toPrevious.pixels[2 * i] = px, m.toPrevious.pixels[2 * i + 1] = py;
+    m.toNext.pixels[2 * i] = nx, m.toNext.pixels[2 * i + 1] = ny;
+  }
+  return m;
+}
+
+Guides guides(const Synthetic& f) { return Guides{f.albedo, f.normal, f.depth}; }
+
+}  // namespace
+
+TEST_CASE("Blender 3.4's Vector pass: direction and sign from a render of a known camera move") {
+  checkConvention("blender34");
+}
+
+TEST_CASE("Blender 5's Vector pass (one part per pass): the same convention") {
+  REQUIRE(std::filesystem::exists(kMotionDir + "blender5/spp4.0002.exr"));
+  checkConvention("blender5");
+}
+
+TEST_CASE("other renderers' motion names are found and decoded") {
+  auto arnold = findMotionChannels({"R", "G", "B", "motionvector.R", "motionvector.G"});
+  REQUIRE(arnold);
+  CHECK(arnold->convention == Convention::ForwardPixels);
+  auto vray =
+      findMotionChannels({"R", "G", "B", "VRayVelocity.R", "VRayVelocity.G", "VRayVelocity.B"});
+  REQUIRE(vray);
+  CHECK(vray->channels == std::vector<std::string>{"VRayVelocity.R", "VRayVelocity.G"});
+  auto prman =
+      findMotionChannels({"Ci.r", "motionBack.r", "motionBack.g", "motionFore.r", "motionFore.g"});
+  REQUIRE(prman);
+  CHECK(prman->convention == Convention::BackFore);
+  auto blender5 =
+      findMotionChannels({"ViewLayer.Combined.R", "ViewLayer.Vector.W", "ViewLayer.Vector.X",
+                          "ViewLayer.Vector.Y", "ViewLayer.Vector.Z"});
+  REQUIRE(blender5);
+  CHECK(blender5->channels.front() == "ViewLayer.Vector.X");
+  CHECK_FALSE(findMotionChannels({"R", "G", "B", "Z"}));
+
+  // Forward motion (3, 2) px, y up: the next frame shows the surface 3 px right
+  // and 2 px up, i.e. (+3, -2) in rows that run down; the previous one mirrored.
+  Image forward(1, 1, 2);
+  forward.pixels = {3.0f, 2.0f};
+  const MotionField f = decodeForward(forward);
+  CHECK(f.toNext.pixels == std::vector<float>{3.0f, -2.0f});
+  CHECK(f.toPrevious.pixels == std::vector<float>{-3.0f, 2.0f});
+  CHECK(f.mirrored);
+  Image back(1, 1, 2), fore(1, 1, 2);
+  back.pixels = {-1.0f, 0.5f};
+  fore.pixels = {2.0f, -1.0f};
+  const MotionField bf = decodeBackFore(back, fore);
+  CHECK(bf.toPrevious.pixels == std::vector<float>{-1.0f, -0.5f});
+  CHECK(bf.toNext.pixels == std::vector<float>{2.0f, 1.0f});
+}
+
+TEST_CASE("a separate motion file of another size is refused with the file's name") {
+  const std::string middle = kMotionDir + "blender34/spp4.0002.exr";
+  CHECK_THROWS_WITH_AS(readMotion(middle, 32, 32), doctest::Contains("spp4.0002.exr"), IoError);
+  CHECK_FALSE(
+      readMotion(std::string(DN_TESTDATA) + "/renderers/blender5_hdri_4spp.exr", 1, 1).has_value());
+}
+
+TEST_CASE("reprojection with a known sub-pixel shift recovers the current frame") {
+  const int w = 48, h = 32;
+  // The scene slides: frame t shows texture at x + 2.5 t, y - 1 t.
+  const Synthetic current = makeFrame(w, h, 0.0, 0.0), previous = makeFrame(w, h, -2.5, 1.0);
+  // The surface at pixel x of this frame was at x + 2.5 (and y - 1) before.
+  const MotionField mc = constantMotion(w, h, 2.5f, -1.0f, -2.5f, 1.0f);
+  const MotionField mp = constantMotion(w, h, 2.5f, -1.0f, -2.5f, 1.0f);
+  const Guides gc = guides(current), gp = guides(previous);
+  const Image positions = chainPositions({{&gc, &mc}, {&gp, &mp}}, false);
+  const Reprojected r = reproject(previous.color, gp, positions, gc);
+  double maxError = 0.0;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool inside = x + 2.5 <= w - 1 && y - 1 >= 0;
+      if (!inside) {
+        if (x + 2.5 > w - 0.5) CHECK(r.trust.at(x, y, 0) == 0.0f);  // left the screen
+        continue;
+      }
+      REQUIRE(r.trust.at(x, y, 0) > 0.99f);
+      for (int c = 0; c < 3; ++c)
+        maxError =
+            std::max(maxError, double(std::abs(r.image.at(x, y, c) - current.color.at(x, y, c))));
+    }
+  CHECK(maxError < 0.02);  // bilinear interpolation of a smooth texture
+}
+
+TEST_CASE("disoccluded pixels behind a moving occluder are rejected, the rest kept") {
+  const int w = 40, h = 24, size = 8;
+  // The background is still; a box moves 4 px right per frame: at x = 10 in the
+  // previous frame, x = 14 now. Pixels 10..13 were behind it and are uncovered now.
+  const Synthetic previous = makeFrame(w, h, 0, 0, 10, 8, size);
+  const Synthetic current = makeFrame(w, h, 0, 0, 14, 8, size);
+  auto motionOf = [&](int boxX) {
+    MotionField m = constantMotion(w, h, 0, 0, 0, 0);
+    for (int y = 8; y < 8 + size; ++y)
+      for (int x = boxX; x < boxX + size; ++x) {
+        m.toPrevious.at(x, y, 0) = -4.0f;
+        m.toNext.at(x, y, 0) = 4.0f;
+      }
+    return m;
+  };
+  const MotionField mc = motionOf(14), mp = motionOf(10);
+  const Guides gc = guides(current), gp = guides(previous);
+  const Image positions = chainPositions({{&gc, &mc}, {&gp, &mp}}, false);
+  const Reprojected r = reproject(previous.color, gp, positions, gc);
+  for (int y = 8; y < 8 + size; ++y) {
+    for (int x = 10; x < 14; ++x) CHECK(r.trust.at(x, y, 0) == 0.0f);  // was behind the box
+    for (int x = 14; x < 22; ++x) CHECK(r.trust.at(x, y, 0) == 1.0f);  // the box itself
+  }
+  CHECK(r.trust.at(2, 2, 0) == 1.0f);
+  CHECK(r.trust.at(30, 20, 0) == 1.0f);
+  // Without motion back (the round trip) the guides alone still reject them:
+  // the previous frame shows the box (depth 2) where the background (10) is now.
+  Guides noMotionCheck = gc;
+  const Reprojected r2 = reproject(previous.color, gp,
+                                   chainPositions({{&gc, &mc}, {&gp, &mc}}, false,
+                                                  TrustOptions{0.05, 0.9, 0.08, 0.25, 1e9, 0.5}),
+                                   noMotionCheck);
+  for (int x = 10; x < 14; ++x) CHECK(r2.trust.at(x, 10, 0) == 0.0f);
+}
+
+namespace {
+
+// A still shot's frame: truth plus noise (seeded), "denoised" as truth plus a
+// smaller leftover error that changes with the seed, as a network's does.
+temporal::WindowFrame stillFrame(const Synthetic& truth, unsigned noiseSeed,
+                                 unsigned leftoverSeed) {
+  std::mt19937 noise(noiseSeed), leftover(leftoverSeed);
+  std::normal_distribution<float> big(0.0f, 0.1f), small(0.0f, 0.03f);
+  temporal::WindowFrame f;
+  f.noisy = truth.color;
+  f.denoised = truth.color;
+  for (std::size_t i = 0; i < f.noisy.pixels.size(); ++i) {
+    f.noisy.pixels[i] += big(noise);
+    f.denoised.pixels[i] += small(leftover);
+  }
+  f.guides = guides(truth);
+  f.motion = constantMotion(truth.color.width, truth.color.height, 0, 0, 0, 0);
+  return f;
+}
+
+double meanSquaredError(const Image& a, const Image& b) {
+  double s = 0.0;
+  for (std::size_t i = 0; i < a.pixels.size(); ++i) s += std::pow(a.pixels[i] - b.pixels[i], 2);
+  return s / a.pixels.size();
+}
+
+}  // namespace
+
+TEST_CASE("temporal filter: independent leftovers average down; repeated noise does no harm") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames;
+  for (unsigned t = 0; t < 5; ++t) frames.push_back(stillFrame(truth, 100 + t, 200 + t));
+  std::vector<const temporal::WindowFrame*> window;
+  for (const auto& f : frames) window.push_back(&f);
+  const temporal::TemporalResult r = temporal::filterFrame(window, 2);
+  CHECK(r.stats.neighbours == 4);
+  CHECK(r.stats.repeatedNoise == 0);
+  CHECK(r.stats.historyShare > 0.6);
+  CHECK(meanSquaredError(r.color, truth.color) <
+        0.4 * meanSquaredError(frames[2].denoised, truth.color));
+
+  // A fixed seed on a still camera: every frame the same noise and the same result.
+  std::vector<temporal::WindowFrame> repeated(5, stillFrame(truth, 7, 8));
+  std::vector<const temporal::WindowFrame*> repeatedWindow;
+  for (const auto& f : repeated) repeatedWindow.push_back(&f);
+  const temporal::TemporalResult same = temporal::filterFrame(repeatedWindow, 2);
+  CHECK(same.stats.repeatedNoise == 4);
+  CHECK(same.stats.historyShare == 0.0);
+  CHECK(same.color.pixels == repeated[2].denoised.pixels);
+
+  // One-sided at the end of a shot, and a missing frame ends the chain.
+  std::vector<const temporal::WindowFrame*> edge = {&frames[0], &frames[1], nullptr, &frames[3]};
+  CHECK(temporal::filterFrame(edge, 0).stats.neighbours == 1);
+  CHECK(temporal::filterFrame(edge, 3).stats.neighbours == 0);
+}
+
+TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames;
+  for (unsigned t = 0; t < 3; ++t) frames.push_back(stillFrame(truth, 300 + t, 400 + t));
+  // The next frame has a shadow (a quarter of the light) over x < 12.
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 12; ++x)
+      for (int c = 0; c < 3; ++c) {
+        frames[2].denoised.at(x, y, c) *= 0.25f;
+        frames[2].noisy.at(x, y, c) *= 0.25f;
+      }
+  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  const temporal::TemporalResult r = temporal::filterFrame(window, 1);
+  // Inside the shadow's region the result stays near the current frame's light,
+  // at most a few percent darker, not the 3/8 darker a blind average would give.
+  double result = 0.0, light = 0.0;
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 12; ++x) result += r.color.at(x, y, 1), light += truth.color.at(x, y, 1);
+  CHECK(result / light > 0.95);
+}
+
+TEST_CASE("accumulating inputs: independent noise averages down, every buffer alike") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames;
+  std::vector<FrameBuffers> inputs(3);
+  for (unsigned t = 0; t < 3; ++t) {
+    frames.push_back(stillFrame(truth, 500 + t, 600 + t));
+    inputs[t].width = 32, inputs[t].height = 24;
+    inputs[t].buffers["color"] = frames[t].noisy;
+    inputs[t].buffers["albedo"] = truth.albedo;
+  }
+  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  std::vector<const FrameBuffers*> buffers = {&inputs[0], &inputs[1], &inputs[2]};
+  temporal::TemporalStats stats;
+  const FrameBuffers out = temporal::accumulateInputs(buffers, window, 1, {}, stats);
+  CHECK(stats.neighbours == 2);
+  CHECK(stats.historyShare == doctest::Approx(2.0 / 3.0));
+  // Three independent noises: a third of the variance.
+  CHECK(meanSquaredError(out.get("color"), truth.color) ==
+        doctest::Approx(meanSquaredError(frames[1].noisy, truth.color) / 3).epsilon(0.2));
+  CHECK(out.get("albedo").pixels == truth.albedo.pixels);
+}
