@@ -1,9 +1,13 @@
 // Where the pretrained OIDN base spends its time on one frame: the stages of
 // runOidn (input, network, output) timed separately, then the network's
 // operators from LibTorch's profiler (time including the operators they call,
-// and calls, for one forward pass).
+// and calls, for one forward pass). --pipeline times, instead, each network
+// of the default's prefilter mode and light-path split (alb, nrm, the large
+// network, ...) and the image work between them, once each. --bf16 runs the
+// networks in bfloat16.
 //
 //   oidn_profile --model models/oidn.dnm FRAME.exr [--threads N] [--repeats N]
+//                [--set INPUT_SET] [--pipeline] [--bf16]
 #include <torch/csrc/autograd/profiler_legacy.h>
 
 #include <algorithm>
@@ -15,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "dn/infer/light_paths.h"
 #include "dn/infer/oidn_filter.h"
 #include "dn/io/buffer_io.h"
 #include "dn/nn/model_file.h"
@@ -75,11 +80,66 @@ void printOperators(const torch::autograd::profiler::thread_event_lists& lists, 
                   t.calls, t.depth);
 }
 
+// The image mirrored about its diagonal, as the light-path split denoises its parts.
+Image transposed(const Image& image) {
+  Image out(image.height, image.width, image.channels);
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      std::copy_n(image.pixel(x, y), image.channels, out.pixel(y, x));
+  return out;
+}
+
+// Every step of the default (runOidnPrefiltered with the split), timed once.
+void profilePipeline(const OidnBase& base, const FrameBuffers& frame, double mpix) {
+  using namespace std::chrono;
+  double total = 0;
+  auto step = [&](const std::string& name, const std::function<void()>& fn) {
+    const double s = medianSeconds(1, fn);
+    total += s;
+    std::printf("%-40s %8.3f s %8.3f s/MPix\n", name.c_str(), s, s / mpix);
+  };
+  auto run = [&](const char* setName, const FrameBuffers& in) {
+    OidnUNet net = base->net(setName);
+    return runOidn(net, oidnInputSet(setName), in, OidnRunOptions()).image;
+  };
+  auto toImage = [](const torch::Tensor& t) {
+    const auto chw = t.squeeze(0);
+    Image image(int(chw.size(2)), int(chw.size(1)), int(chw.size(0)));
+    torch::from_blob(image.pixels.data(), {image.height, image.width, image.channels})
+        .copy_(chw.permute({1, 2, 0}));
+    return image;
+  };
+  FrameBuffers clean = frame, part;
+  part.width = frame.height;
+  part.height = frame.width;
+  torch::Tensor whole, diffuse, rest;
+  LightPathSplit split;
+  step("alb (albedo)", [&] { clean.buffers["albedo"] = toImage(run("alb", frame)); });
+  step("nrm (normal)", [&] { clean.buffers["normal"] = toImage(run("nrm", frame)); });
+  step("large (whole frame)", [&] { whole = run("hdr_calb_cnrm_large", clean); });
+  step("split + transposes", [&] {
+    split = splitDiffuse(frame);
+    part.buffers["albedo"] = transposed(frame.get("diffuse_color"));
+    part.buffers["normal"] = transposed(clean.get("normal"));
+    part.buffers["color"] = transposed(split.diffuse);
+  });
+  step("alb (diffuse colour)", [&] { part.buffers["albedo"] = toImage(run("alb", part)); });
+  step("large (diffuse part)", [&] { diffuse = run("hdr_calb_cnrm_large", part); });
+  step("large (rest)", [&] {
+    part.buffers["albedo"] = transposed(clean.get("albedo"));
+    part.buffers["color"] = transposed(split.rest);
+    rest = run("hdr_calb_cnrm_large", part);
+  });
+  step("average", [&] { whole = 0.5 * (whole + (diffuse + rest).transpose(2, 3)); });
+  std::printf("%-40s %8.3f s %8.3f s/MPix\n", "total", total, total / mpix);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string model, frame;
+  std::string model, frame, setName;
   int threads = 2, repeats = 3;
+  bool pipeline = false, bf16 = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--model" && i + 1 < argc)
@@ -88,24 +148,43 @@ int main(int argc, char** argv) {
       threads = std::atoi(argv[++i]);
     else if (a == "--repeats" && i + 1 < argc)
       repeats = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--set" && i + 1 < argc)
+      setName = argv[++i];
+    else if (a == "--pipeline")
+      pipeline = true;
+    else if (a == "--bf16")
+      bf16 = true;
     else
       frame = a;
   }
   if (model.empty() || frame.empty()) {
     std::fprintf(stderr,
-                 "usage: oidn_profile --model FILE FRAME.exr [--threads N] [--repeats N]\n");
+                 "usage: oidn_profile --model FILE FRAME.exr [--threads N] [--repeats N] "
+                 "[--set INPUT_SET] [--pipeline] [--bf16]\n");
     return 2;
   }
   torch::set_num_threads(threads);
   c10::InferenceMode inference;
   LoadedModel loaded = loadModelFile(model);
-  loaded.oidn->eval();
-  loaded.oidn->useChannelsLast();
+  OidnBase base = loaded.oidnControlled ? loaded.oidnControlled->base() : loaded.oidn;
+  base->eval();
+  base->useChannelsLast();
+  base->useBFloat16(bf16);
   const FrameBuffers buffers = readFrame(frame);
-  auto [net, set] = loaded.oidn->pick(buffers.names());
+  const double mpix = buffers.width * double(buffers.height) / 1e6;
+  if (pipeline) {
+    std::printf("%dx%d, the default's networks, %d threads%s\n", buffers.width, buffers.height,
+                threads, bf16 ? ", bfloat16" : "");
+    profilePipeline(base, buffers, mpix);
+    return 0;
+  }
+  auto [net, set] = base->pick(buffers.names());
+  if (!setName.empty()) {
+    net = base->net(setName);
+    set = &oidnInputSet(setName);
+  }
   const float exposure = tonemap::oidnExposure(buffers.get("color"));
   const TileRect all{0, 0, buffers.height, buffers.width};
-  const double mpix = buffers.width * double(buffers.height) / 1e6;
   std::printf("%dx%d, input set %s, %d threads, median of %d\n", buffers.width, buffers.height,
               set->name.c_str(), threads, repeats);
 

@@ -154,6 +154,7 @@ double OidnPipeline::bytesPerPixel() const {
 // Steps 1 to 4; step 5 when the gate opens or the caller asks for it.
 DenoiseResult OidnPipeline::denoise(const FrameBuffers& frame,
                                     const DenoiseOptions& options) const {
+  OidnBase(base_)->useBFloat16(options.bfloat16);  // a setting of the networks' calls
   const bool control = controlApplies(frame.names());
   if (control && options.control == ControlUse::Always) return denoiseWithControl(frame, options);
   DenoiseResult result = denoiseWithBase(frame, options);

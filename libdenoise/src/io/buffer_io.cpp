@@ -518,19 +518,39 @@ FrameBuffers readLocated(OIIO::ImageInput& in, const ChannelTable& table, const 
   frame.displayWindow = displayWindowOf(colorSpec);
   frame.width = frame.dataWindow.width;
   frame.height = frame.dataWindow.height;
-  for (const auto& [name, channels] : located) {
-    const bool wanted = options.only.empty() || std::find(options.only.begin(), options.only.end(),
-                                                          name) != options.only.end();
-    if (!wanted) continue;
-    Image image = readChannels(in, table, path, channels, frame.dataWindow);
+  // One read for every wanted buffer and the alpha: a channel's rows are
+  // decompressed with every other channel of its part, so a read per buffer
+  // decompressed a 57-layer 1080p frame 15 times (half of `-q fast`'s CPU time).
+  std::vector<const Located*> wanted;
+  std::vector<std::string> names;
+  for (const auto& l : located)
+    if (options.only.empty() ||
+        std::find(options.only.begin(), options.only.end(), l.buffer) != options.only.end()) {
+      wanted.push_back(&l);
+      names.insert(names.end(), l.channels.begin(), l.channels.end());
+    }
+  const std::string alpha = alphaChannelOf(table, *color);
+  if (!alpha.empty()) names.push_back(alpha);
+  const Image together = readChannels(in, table, path, names, frame.dataWindow);
+  int first = 0;
+  auto nextChannels = [&](int count) {
+    Image image(together.width, together.height, count);
+    for (std::size_t i = 0; i < image.pixelCount(); ++i)
+      std::copy_n(&together.pixels[i * together.channels + first], count, &image.pixels[i * count]);
+    first += count;
+    return image;
+  };
+  for (const Located* l : wanted) {
+    const std::string& name = l->buffer;
+    const std::vector<std::string>& channels = l->channels;
+    Image image = nextChannels(static_cast<int>(channels.size()));
     const OIIO::ImageSpec& spec = table.partOf(channels.front()).spec;
     if (name == "color" || name == "albedo") linearizeIfSrgb(image, spec, name, frame.notes);
     if (name == "normal") decodeNormals(image, channels, frame.notes);
     frame.buffers[name] = std::move(image);
     frame.sourceChannels[name] = channels;
   }
-  const std::string alpha = alphaChannelOf(table, *color);
-  if (!alpha.empty()) frame.alpha = readChannels(in, table, path, {alpha}, frame.dataWindow);
+  if (!alpha.empty()) frame.alpha = nextChannels(1);
   if (color->front().find("Noisy Image") != std::string::npos)
     frame.notes.push_back("color: from '" + color->front().substr(0, color->front().rfind('.')) +
                           "' (Cycles' own denoiser ran, so Combined is already denoised)");

@@ -64,6 +64,11 @@ struct DenoiseOptions {
   // denoised apart and averaged with the whole (dn/infer/light_paths.h).
   bool lightPaths = true;
   ControlUse control = ControlUse::Auto;
+  // OIDN base: the networks' inner convolutions in bfloat16 with float
+  // accumulation (dn::OidnUNetImpl::useBFloat16): about twice as fast where
+  // the CPU has AMX (dn::cpuHasBFloat16Matrix), no longer OIDN's result bit
+  // for bit (docs/dndenoise.md#speed-and-memory has its quality).
+  bool bfloat16 = false;
   // Models with a diffusion Control Module: the noise levels of the
   // refinement, noisiest first; unset: the model's own; empty: none.
   std::optional<std::vector<double>> sigmas;

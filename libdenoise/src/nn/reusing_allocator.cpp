@@ -1,0 +1,110 @@
+#include "dn/nn/reusing_allocator.h"
+
+#include <algorithm>
+#include <map>
+#include <mutex>
+
+#include <c10/core/Allocator.h>
+#include <c10/core/impl/alloc_cpu.h>
+
+namespace dn {
+namespace {
+
+constexpr std::size_t kMinCachedBlock = std::size_t(1) << 20;
+// The block's size sits in front of its data, so that a raw pointer can be
+// freed (Allocator::raw_deleter) and the data stays 64-byte aligned.
+constexpr std::size_t kHeader = 64;
+
+class ReusingCpuAllocator final : public c10::Allocator {
+ public:
+  c10::DataPtr allocate(std::size_t bytes) const override {
+    void* data = take(bytes);
+    return {data, data, &release, c10::Device(c10::DeviceType::CPU)};
+  }
+  c10::DeleterFnPtr raw_deleter() const override { return &release; }
+
+  void setCap(std::size_t bytes) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    cap_ = bytes;
+    trim();
+  }
+  std::size_t cached() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return cached_;
+  }
+
+  static ReusingCpuAllocator& instance() {
+    static auto* allocator = new ReusingCpuAllocator;  // never destroyed: tensors may outlive main
+    return *allocator;
+  }
+
+ private:
+  void* take(std::size_t bytes) const {
+    if (bytes >= kMinCachedBlock) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      live_ += bytes;
+      auto it = free_.find(bytes);
+      if (it != free_.end()) {
+        char* block = it->second;
+        free_.erase(it);
+        cached_ -= bytes;
+        return block + kHeader;
+      }
+      // A new block: cached ones go first where live and cached blocks would
+      // pass their high-water mark, so that the peak is the one without a cache.
+      while (live_ + cached_ > highWater_ && !free_.empty()) evict();
+      highWater_ = std::max(highWater_, live_ + cached_);
+    }
+    auto* block = static_cast<char*>(c10::alloc_cpu(bytes + kHeader));
+    *reinterpret_cast<std::size_t*>(block) = bytes;
+    return block + kHeader;
+  }
+
+  static void release(void* data) {
+    if (!data) return;
+    char* block = static_cast<char*>(data) - kHeader;
+    const std::size_t bytes = *reinterpret_cast<std::size_t*>(block);
+    ReusingCpuAllocator& self = instance();
+    if (bytes >= kMinCachedBlock) {
+      std::lock_guard<std::mutex> lock(self.mutex_);
+      self.live_ -= bytes;
+      if (self.cached_ + bytes <= self.cap_) {
+        self.free_.emplace(bytes, block);
+        self.cached_ += bytes;
+        return;
+      }
+    }
+    c10::free_cpu(block);
+  }
+
+  // Frees the largest cached block.
+  void evict() const {
+    auto last = std::prev(free_.end());
+    cached_ -= last->first;
+    c10::free_cpu(last->second);
+    free_.erase(last);
+  }
+  // Frees cached blocks, largest first, until the cache fits the cap.
+  void trim() {
+    while (cached_ > cap_ && !free_.empty()) evict();
+  }
+
+  mutable std::mutex mutex_;
+  mutable std::multimap<std::size_t, char*> free_;  // by size
+  mutable std::size_t cached_ = 0;
+  mutable std::size_t live_ = 0;       // bytes of large blocks in use
+  mutable std::size_t highWater_ = 0;  // the most of live_ + cached_ so far
+  std::size_t cap_ = 0;
+};
+
+}  // namespace
+
+void useReusingCpuAllocator(std::size_t maxCachedBytes) {
+  ReusingCpuAllocator& allocator = ReusingCpuAllocator::instance();
+  allocator.setCap(maxCachedBytes);
+  c10::SetAllocator(c10::DeviceType::CPU, &allocator, /*priority=*/1);
+}
+
+std::size_t reusingCpuAllocatorCachedBytes() { return ReusingCpuAllocator::instance().cached(); }
+
+}  // namespace dn
