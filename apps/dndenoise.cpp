@@ -31,6 +31,7 @@
 #include "dn/metrics.h"
 #include "dn/nn/reusing_allocator.h"
 #include "dn/parallel.h"
+#include "dn/passes/joint_denoise.h"
 
 namespace fs = std::filesystem;
 using namespace dn;
@@ -112,6 +113,12 @@ output:
   --float             float result channels (default: half); with a .tif output,
                       a linear float TIFF instead of a display picture
   --inplace           allow the output to replace the input file
+  --passes            also write the light passes (Cycles: Diffuse Direct ...
+                      Environment; Arnold's LPE AOVs) denoised, as layers
+                      "Denoised <pass>" beside them, that recombine by the
+                      renderer's rule to the denoised beauty; passes the file
+                      lacks are covered by a "Denoised Residual" layer. Result
+                      layers are then float (docs/dndenoise.md#light-passes)
 display (PNG/JPEG/TIFF outputs and --preview):
   --ocio CONFIG       OpenColorIO config file (default: $OCIO, else the built-in
                       sRGB config: clamp to [0, 1] and the sRGB curve)
@@ -175,6 +182,7 @@ struct Options {
   std::string preview;
   tonemap::PreviewOptions display;
   bool listViews = false;
+  bool passes = false;             // --passes
   std::vector<GivenOption> given;  // options that act on some models only
   cli::TemporalSettings temporal;
 };
@@ -341,6 +349,9 @@ Options parseArgs(int argc, char** argv) {
       o.floatOut = true;
     } else if (args.flag("--inplace")) {
       o.inplace = true;
+    } else if (args.flag("--passes")) {
+      o.passes = true;
+      o.given.push_back({"--passes", OptionScope::OidnBase});
     } else if (args.flag("--preview")) {
       o.preview = args.value("--preview");
     } else if (args.flag("--ocio")) {
@@ -406,6 +417,10 @@ Options parseArgs(int argc, char** argv) {
   if (o.maxError >= 0 && o.reference.empty()) throw cli::UsageError("--maxerror needs --ref REF");
   if (!o.reference.empty() && o.maxError < 0) throw cli::UsageError("--ref needs --maxerror");
   checkOptionPairs(o);
+  if (o.passes && (o.rgbOnly || !o.separateFiles.empty()))
+    throw cli::UsageError(
+        "--passes needs a multilayer EXR input and output, not --rgb-only or "
+        "separate buffer files");
   if (o.device != "cpu" && o.device != "cuda")
     throw cli::UsageError("--device must be cpu or cuda");
   if (o.device == "cuda" && !torch::cuda::is_available())
@@ -512,6 +527,20 @@ void checkAgainstReference(const Options& o, const Image& ref, const Image& resu
   fmt::print(stderr, "dndenoise: {} against {}: {:.6g} (limit {:.6g}){}\n", o.maxErrorMetric,
              o.reference, v, o.maxError, worse ? " FAILED" : "");
   if (worse) status = cli::kExitThreshold;
+}
+
+// -v: the light passes found, the rule and how closely the denoised ones recombine.
+void reportPasses(const std::string& name, const PassesResult& passes) {
+  std::string found;
+  for (const auto& key : passes.layout.usedKeys())
+    found += (found.empty() ? "" : ", ") + passes.layout.layerName(key);
+  fmt::print(stderr, "dndenoise: {}: {} light passes {}; rule {}\n", name,
+             passes.layout.rule->renderer, found, passes.layout.formula());
+  for (const auto& note : passes.layout.notes)
+    fmt::print(stderr, "dndenoise: {}: {}\n", name, note);
+  fmt::print(stderr,
+             "dndenoise: {}: denoised passes recombine to the beauty within {:.2g} relative\n",
+             name, passes.denoised.maxRelativeError);
 }
 
 // One line, exit 1, for an option given that the loaded model has no use for.
@@ -639,8 +668,13 @@ int run(Options o, int argc, char** argv) {
   cli::setToolProvenance("dndenoise", argc, argv, o.model);
   const Image ref = o.reference.empty() ? Image() : readReference(o);
   // Every input's header before the first frame: a bad frame 90 fails now, not in an hour.
-  for (const auto& [input, output] : jobs)
+  for (const auto& [input, output] : jobs) {
     if (!input.empty()) readInputHeader(o, denoiser, input);
+    if (o.passes && outputKindFor(output, o.floatOut) != OutputKind::Layered)
+      throw cli::UsageError("--passes writes a multilayer EXR, not " + output);
+    if (o.passes) requireLightPasses(input, o.read.viewLayer);
+  }
+  const OidnBase passBase = o.passes ? oidnBaseOfModel(o.model) : OidnBase(nullptr);
 
   o.temporal.read = o.read;
   std::vector<std::string> jobInputs;
@@ -743,6 +777,11 @@ int run(Options o, int argc, char** argv) {
     if (clamped > 0)
       fmt::print(stderr, "dndenoise: {}: {} values beyond the float range clamped\n", name,
                  clamped);
+    std::optional<PassesResult> passes;
+    if (o.passes) {
+      passes = denoisePassesOfFile(passBase, input, frame, result.color, passOptionsFor(options));
+      if (o.verbose) reportPasses(name, *passes);
+    }
     const OutputKind kind = outputKindFor(output, o.floatOut);
     if (kind == OutputKind::Display) {
       writeDisplayImage(output, result.color, *display);
@@ -757,6 +796,10 @@ int run(Options o, int argc, char** argv) {
       write.layer = layerPrefixOf(frame) + o.layer;
       if (!result.uncertainty.empty() && !write.rgbOnly)
         write.extraLayers[layerPrefixOf(frame) + "uncertainty"] = result.uncertainty;
+      if (passes) {  // float, so that the rule holds in the file too
+        write.half = false;
+        write.extraLayers.insert(passes->layers.begin(), passes->layers.end());
+      }
       writeResult(input.empty() ? name : input, output, result.color, write, o.inplace);
     }
     if (!previews.empty()) writeDisplayImage(previews[j], result.color, *display);

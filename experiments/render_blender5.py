@@ -41,6 +41,8 @@ def parse_args():
     p.add_argument("--ref-spp", type=int, default=1024, help="0: no reference")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--half", action="store_true", help="half-float channels (default: float)")
+    p.add_argument("--all-light-passes", action="store_true",
+                   help="also Emission, Environment and Volume Direct/Indirect (denoised passes, issue 33)")
     p.add_argument("--border", default=None,
                    help="X0,Y0,X1,Y1 in [0, 1]: render and crop to this region (small fixtures)")
     return p.parse_args()
@@ -272,6 +274,11 @@ def configure(scene, args):
     for kind in ("diffuse", "glossy", "transmission"):
         for part in ("direct", "indirect", "color"):
             setattr(layer, "use_pass_%s_%s" % (kind, part), True)
+    if args.all_light_passes:
+        layer.use_pass_emit = True
+        layer.use_pass_environment = True
+        layer.cycles.use_pass_volume_direct = True
+        layer.cycles.use_pass_volume_indirect = True
 
 
 def render(scene, path, samples, seed, reference):
