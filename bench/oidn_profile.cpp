@@ -80,15 +80,6 @@ void printOperators(const torch::autograd::profiler::thread_event_lists& lists, 
                   t.calls, t.depth);
 }
 
-// The image mirrored about its diagonal, as the light-path split denoises its parts.
-Image transposed(const Image& image) {
-  Image out(image.height, image.width, image.channels);
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x)
-      std::copy_n(image.pixel(x, y), image.channels, out.pixel(y, x));
-  return out;
-}
-
 // Every step of the default (runOidnPrefiltered with the split), timed once.
 void profilePipeline(const OidnBase& base, const FrameBuffers& frame, double mpix) {
   using namespace std::chrono;

@@ -106,15 +106,23 @@ def evaluate(args, extra):
             result = os.path.join(out_dir, f"{group}_{scene}_spp{spp}.exr")
             if args.reuse and os.path.exists(result):
                 pass
-            elif args.isik:
-                run([os.path.join(args.bin, "dncleanse"), source, "-o", result, "--model", args.isik,
-                     "--rgb-only"])
             elif args.oidn:
                 run([sys.executable, os.path.join(HERE, "oidn_denoise.py"), "--threads", str(args.threads),
                      *extra, source, "-o", result])
             else:
-                run([os.path.join(args.bin, "dndenoise"), "--rgb-only", "--float", "--threads",
-                     str(args.threads), *extra, source, "-o", result])
+                cmd = ([os.path.join(args.bin, "dncleanse"), source, "-o", result, "--model", args.isik,
+                        "--rgb-only"] if args.isik else
+                       [os.path.join(args.bin, "dndenoise"), "--rgb-only", "--float", "--threads",
+                        str(args.threads), *extra, source, "-o", result])
+                if args.skip_unusable:  # e.g. a model that needs passes the renderer did not write
+                    out = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                    if out.returncode == 1:
+                        print(f"{args.name} {group}/{scene} spp{spp}: skipped: {out.stderr.strip()}",
+                              flush=True)
+                        continue
+                    out.check_returncode()
+                else:
+                    run(cmd)
         m = score(args.bin, reference, result)
         rows.append({"set": group, "scene": scene, "spp": spp, **{k: m[k] for k in METRICS}})
         print(f"{args.name} {group}/{scene} spp{spp}: PSNR {m['psnr']:.2f} FLIP {m['flip']:.4f}", flush=True)
@@ -265,6 +273,8 @@ def main():
     p.add_argument("--name", help="name of the method (output subfolder)")
     p.add_argument("--oidn", action="store_true", help="run OIDN (pyoidn) instead of dndenoise")
     p.add_argument("--isik", metavar="MODEL", help="run dncleanse with this kernel network instead")
+    p.add_argument("--skip-unusable", action="store_true",
+                   help="leave out the renders dndenoise refuses (exit 1) instead of stopping")
     p.add_argument("--table", nargs="+", metavar="NAME", help="print a table of stored results")
     p.add_argument("--compare", nargs=2, metavar=("A", "B"), help="count the frames where B beats A")
     p.add_argument("--results", help="with --table: write it into this file's eval_sets section instead")

@@ -50,10 +50,11 @@ ABLATIONS = [
      ["--", "--model", "models/oidn.dnm"]),
     ("control_on", "the Control Module forced on (`--control on`)", "models/default.dnm",
      ["--", "--control", "on"]),
-    ("scratch", "the from-scratch diffusion model (an experiment)", "models/diffusion-scratch.dnm",
-     ["--", "--model", "models/diffusion-scratch.dnm"]),
-    ("isik", "the Isik-style kernel-predicting network (`dncleanse`)", "models/isik.pt",
-     ["--isik", "models/isik.pt"]),
+    ("scratch", "the from-scratch diffusion model (an experiment; it needs Cycles' light passes)",
+     "models/diffusion-scratch.dnm", ["--skip-unusable", "--", "--model", "models/diffusion-scratch.dnm"]),
+    ("isik", "the Isik-style kernel-predicting network (`dncleanse`; it needs Cycles' buffers)",
+     "models/isik.pt",
+     ["--skip-unusable", "--isik", "models/isik.pt"]),
 ]
 KEPT_ELSEWHERE = ("eval_sets.py",)  # sections this page regenerates itself
 
@@ -143,6 +144,9 @@ def page(args, command):
         "frames of PSNR (dB, Reinhard tonemap), FLIP and L1 (HDR), as `dnmetrics` computes them; "
         "higher PSNR, lower FLIP and L1 are better.", "",
         "## The default against OIDN", "",
+        "`default`: `dndenoise` with no options, `models/default.dnm` (OIDN's networks in their prefilter "
+        "mode, and the Control Module where the gate opens); `oidn`, `oidn_pre`: OIDN 2.5.1 itself through "
+        "the `pyoidn` wheel, its usual call and its prefilter mode.", "",
     ]
     lines += eval_sets.table_lines({n: results[n] for n in ("oidn", "oidn_pre", "default")},
                                    ["oidn", "oidn_pre", "default"])
@@ -154,9 +158,12 @@ def page(args, command):
                                    ["oidn", "fast", "default", "high"])
     lines += ["", "## Speed", ""] + speed_lines(args)
     lines += ["", "## Ablations", "",
-              "Each against the default, on the same renders; the model file is named below.", ""]
-    ablations = [m[0] for m in ABLATIONS] + ["default"]
-    lines += eval_sets.table_lines({n: results[n] for n in ablations}, ablations)
+              "Each against the default on the renders it could denoise; the model file is named in "
+              "each heading.", ""]
+    for name, what, model, _ in ABLATIONS:
+        lines += [f"### `{name}`: {what}" + (f", `{model}`" if model else ""), ""]
+        lines += eval_sets.table_lines({n: results[n] for n in (name, "default")}, [name, "default"])
+        lines += [""]
     lines += ["", "## Methods", ""] + method_list(OIDN + [DEFAULT] + LEVELS + ABLATIONS)
     lines += ["", "Each row of the tables above was made by `python3 experiments/eval_sets.py --name "
               "NAME ARGUMENTS` with the sets' folders; OIDN runs through the `pyoidn` wheel "

@@ -40,4 +40,12 @@ LightPathSplit splitDiffuse(const FrameBuffers& frame) {
   return split;
 }
 
+Image transposed(const Image& image) {
+  Image out(image.height, image.width, image.channels);
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      std::copy_n(image.pixel(x, y), image.channels, out.pixel(y, x));
+  return out;
+}
+
 }  // namespace dn

@@ -20,15 +20,6 @@ bool contains(const std::vector<std::string>& names, const std::string& name) {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
-// The image mirrored about its diagonal: x and y swapped.
-Image transposed(const Image& image) {
-  Image out(image.height, image.width, image.channels);
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x)
-      std::copy_n(image.pixel(x, y), image.channels, out.pixel(y, x));
-  return out;
-}
-
 // The frame's albedo or normal (setName "alb" or "nrm") denoised by the base's own network.
 Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& frame,
                  const OidnRunOptions& options) {

@@ -31,4 +31,9 @@ struct LightPathSplit {
 // missing (see hasDiffusePasses).
 LightPathSplit splitDiffuse(const FrameBuffers& frame);
 
+// The image mirrored about its diagonal (x and y swapped): the split's parts
+// are denoised transposed, so that the network's errors there differ more
+// from its errors on the whole.
+Image transposed(const Image& image);
+
 }  // namespace dn
