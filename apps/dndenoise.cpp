@@ -59,7 +59,7 @@ quality (the default model, models/default.dnm, and others over OIDN's networks)
                       fast: one network on the noisy buffers (OIDN's usual call);
                       balanced (default): albedo and normal prefiltered (OIDN's
                       prefilter mode); high: balanced plus the light-path split
-                      where Cycles wrote the diffuse passes (2.4x the time,
+                      where Cycles wrote the diffuse passes (2.1x the time,
                       0.04-0.18 dB better)
   --prefilter on|off  albedo and normal denoised first (on, default: fast turns it off)
   --light-paths on|off  the light-path split where the passes exist (off, default;

@@ -62,7 +62,7 @@ struct DenoiseOptions {
   bool prefilter = true;
   // Prefiltered, with the diffuse light passes: the diffuse part and the rest
   // denoised apart and averaged with the whole (dn/infer/light_paths.h). Off
-  // by default (Quality::Balanced): three more networks, 2.4 times OIDN's
+  // by default (Quality::Balanced): three more networks, 2.4-2.8 times OIDN's
   // prefilter mode per frame, for 0.04 to 0.18 dB.
   bool lightPaths = false;
   ControlUse control = ControlUse::Auto;
