@@ -674,7 +674,9 @@ int run(Options o, int argc, char** argv) {
       throw cli::UsageError("--passes writes a multilayer EXR, not " + output);
     if (o.passes) requireLightPasses(input, o.read.viewLayer);
   }
-  const OidnBase passBase = o.passes ? oidnBaseOfModel(o.model) : OidnBase(nullptr);
+  // The passes run the networks the denoiser already loaded.
+  const OidnBase passBase = o.passes ? denoiser.oidnBase() : OidnBase(nullptr);
+  if (o.passes) requirePrefilterNetworks(passBase, o.model);
 
   o.temporal.read = o.read;
   std::vector<std::string> jobInputs;

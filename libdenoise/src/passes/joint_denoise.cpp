@@ -270,6 +270,13 @@ PassDenoiseOptions passOptionsFor(const DenoiseOptions& denoise) {
   return options;
 }
 
+void requirePrefilterNetworks(const OidnBase& base, const std::string& modelPath) {
+  if (!base || !base->canPrefilter())
+    throw IoError(modelPath +
+                  ": denoising light passes needs a model with OIDN's prefilter-mode "
+                  "networks (models/default.dnm)");
+}
+
 OidnBase oidnBaseOfModel(const std::string& modelPath) {
   LoadedModel model;
   try {
@@ -278,10 +285,7 @@ OidnBase oidnBaseOfModel(const std::string& modelPath) {
     throw IoError(e.what());
   }
   OidnBase base = model.oidnControlled ? model.oidnControlled->base() : model.oidn;
-  if (!base || !base->canPrefilter())
-    throw IoError(modelPath +
-                  ": denoising light passes needs a model with OIDN's prefilter-mode "
-                  "networks (models/default.dnm)");
+  requirePrefilterNetworks(base, modelPath);
   return base;
 }
 

@@ -26,6 +26,9 @@ class Denoiser {
   // Whether the model runs the default pipeline over OIDN's networks (false:
   // the from-scratch diffusion experiment).
   bool overOidnBase() const { return model_.info.base_kind == BaseKind::Oidn; }
+  // OIDN's networks the default pipeline runs (null for the from-scratch model),
+  // for callers that run them on other buffers, e.g. the light passes.
+  OidnBase oidnBase() const { return model_.oidn; }
   // Buffers the model needs that are not among `available` (empty: ready to
   // denoise); `available` as FrameBuffers::names() or dn::availableBuffers give it.
   std::vector<std::string> missingBuffers(const std::vector<std::string>& available) const;

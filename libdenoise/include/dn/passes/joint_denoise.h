@@ -114,5 +114,8 @@ PassDenoiseOptions passOptionsFor(const DenoiseOptions& denoise);
 // The pretrained OIDN base of a model file (throws IoError naming the file
 // when the model has none or lacks the prefilter mode's networks).
 OidnBase oidnBaseOfModel(const std::string& modelPath);
+// Throws IoError naming `modelPath` when `base` (null for models not over
+// OIDN's networks) lacks the prefilter mode's networks the passes need.
+void requirePrefilterNetworks(const OidnBase& base, const std::string& modelPath);
 
 }  // namespace dn
