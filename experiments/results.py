@@ -6,8 +6,9 @@
 1. Renders the evaluation sets that are missing (resumable; --no-render scores only what
    exists): Blender 5, Mitsuba with a box and with a Gaussian pixel filter
    (render_evaldata.sh, into --evaldata) and the user-style Blender 3.4 scenes
-   (user_scenes.py, into --user). The Cycles 3.4 test split is scored where it exists
-   (--test-split; `make -C experiments data` renders the data set).
+   (user_scenes.py, into --user), and the test split of the Cycles 3.4 data set: its 16
+   test seeds among seeds 0-299, frame 0, 16 stacks of 4 spp and a 2 x 256-spp reference
+   (scenegen/make_dataset.py, into --test-split's parent).
 2. Scores every method on every set with eval_sets.py (results in WORK/<name>, kept
    between runs with --reuse).
 3. Times the default's quality levels against OIDN's two modes (bench/speed_vs_oidn.py),
@@ -64,7 +65,17 @@ def run(cmd, **kw):
     subprocess.run(cmd, check=True, cwd=ROOT, **kw)
 
 
+def test_seeds(count=300):
+    sys.path.insert(0, os.path.join(ROOT, "scenegen"))
+    from make_dataset import split_of  # noqa: E402
+    return [seed for seed in range(count) if split_of(seed) == "test"]
+
+
 def render(args):
+    run([sys.executable, os.path.join(ROOT, "scenegen", "make_dataset.py"),
+         "--out", os.path.dirname(os.path.abspath(args.test_split)),
+         "--seeds", ",".join(map(str, test_seeds())), "--frames", "1", "--res", "128", "--spp", "4",
+         "--stacks", "16", "--gt-spp", "256", "--threads", str(args.threads)], stdout=subprocess.DEVNULL)
     env = dict(os.environ, THREADS=str(args.threads))
     run([os.path.join(HERE, "render_evaldata.sh"), args.evaldata], env=env)
     os.makedirs(args.user, exist_ok=True)
@@ -178,7 +189,7 @@ def main():
     p.add_argument("--evaldata", default="/work/evaldata")
     p.add_argument("--user", default="/work/evaldata/user")
     p.add_argument("--user-res", default="384x216")
-    p.add_argument("--test-split", default="/work/data/scenes3/test")
+    p.add_argument("--test-split", default="/work/data/scenes/test")
     p.add_argument("--work", default="/work/eval")
     p.add_argument("--bin", default=os.path.join(ROOT, "build", "bin"))
     p.add_argument("--threads", type=int, default=2)

@@ -1,6 +1,7 @@
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 
+#include <OpenImageIO/half.h>
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
 
@@ -8,6 +9,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -225,57 +227,119 @@ int stripRows(const OIIO::ImageSpec& spec) {
   return std::max(1, (kStripRows + spec.tile_height - 1) / spec.tile_height) * spec.tile_height;
 }
 
-// Rows [y0, y1) of channels [cb, ce) of one part, full width, as float.
+// Rows [y0, y1) of channels [cb, ce) of one part, full width, as `type`.
 bool readStrip(OIIO::ImageInput& in, int part, const OIIO::ImageSpec& spec, int y0, int y1, int cb,
-               int ce, float* out) {
+               int ce, OIIO::TypeDesc type, void* out) {
   if (spec.tile_width > 0)
     return in.read_tiles(part, 0, spec.x, spec.x + spec.width, y0, y1, spec.z,
-                         spec.z + std::max(1, spec.depth), cb, ce, OIIO::TypeDesc::FLOAT, out);
-  return in.read_scanlines(part, 0, y0, y1, spec.z, cb, ce, OIIO::TypeDesc::FLOAT, out);
+                         spec.z + std::max(1, spec.depth), cb, ce, type, out);
+  return in.read_scanlines(part, 0, y0, y1, spec.z, cb, ce, type, out);
 }
 
-// Reads the named channels into one interleaved float image covering
-// `window`, by pixel coordinates: where a channel's part has no data, 0.
-Image readChannels(OIIO::ImageInput& in, const ChannelTable& table, const std::string& path,
-                   const std::vector<std::string>& names, const PixelWindow& window) {
-  std::vector<ChannelRef> refs;
-  for (const auto& n : names) {
-    auto it = table.byName.find(n);
-    if (it == table.byName.end()) fail(path, "has no channel '" + n + "'");
-    refs.push_back(it->second);
+// `count` values of type T `strideBytes` apart, as float, to every `toStride`-th float of `to`.
+template <class T>
+void scatter(const unsigned char* from, int strideBytes, int count, float* to, int toStride) {
+  for (int i = 0; i < count; ++i) {
+    T value;
+    std::memcpy(&value, from + std::size_t(i) * strideBytes, sizeof value);
+    to[std::size_t(i) * toStride] = float(value);
   }
-  Image image(window.width, window.height, static_cast<int>(names.size()));
+}
+
+// How rows of channels [cb, ce) of one part are read: as stored where every
+// channel is half or float (converted while scattered, so the channels between
+// the wanted ones are never converted), else all as float.
+struct StripLayout {
+  OIIO::TypeDesc request = OIIO::TypeDesc::UNKNOWN;  // UNKNOWN: each channel as stored
+  std::vector<int> offset;                           // bytes from a pixel's first channel
+  std::vector<bool> half;
+  int pixelBytes = 0;
+};
+
+StripLayout stripLayout(const OIIO::ImageSpec& spec, int cb, int ce) {
+  StripLayout layout;
+  for (int c = cb; c < ce; ++c) {
+    const OIIO::TypeDesc type = spec.channelformat(c);
+    if (type != OIIO::TypeDesc::HALF && type != OIIO::TypeDesc::FLOAT)
+      layout.request = OIIO::TypeDesc::FLOAT;
+  }
+  for (int c = cb; c < ce; ++c) {
+    const bool half =
+        layout.request == OIIO::TypeDesc::UNKNOWN && spec.channelformat(c) == OIIO::TypeDesc::HALF;
+    layout.offset.push_back(layout.pixelBytes);
+    layout.half.push_back(half);
+    layout.pixelBytes += half ? 2 : 4;
+  }
+  return layout;
+}
+
+// Reads groups of named channels into one interleaved float image per group,
+// covering `window`, by pixel coordinates: where a channel's part has no data, 0.
+// Each part's rows are decompressed once for every group.
+std::vector<Image> readChannelGroups(OIIO::ImageInput& in, const ChannelTable& table,
+                                     const std::string& path,
+                                     const std::vector<std::vector<std::string>>& groups,
+                                     const PixelWindow& window) {
+  struct Target {
+    ChannelRef source;
+    float* first;  // the channel's value of the window's first pixel
+    int stride;    // floats from one pixel to the next
+  };
+  std::vector<Image> images;
+  std::vector<Target> targets;
+  images.reserve(groups.size());
+  for (const auto& names : groups) {
+    images.emplace_back(window.width, window.height, static_cast<int>(names.size()));
+    for (std::size_t c = 0; c < names.size(); ++c) {
+      auto it = table.byName.find(names[c]);
+      if (it == table.byName.end()) fail(path, "has no channel '" + names[c] + "'");
+      targets.push_back({it->second, images.back().pixels.data() + c, images.back().channels});
+    }
+  }
   std::set<int> parts;
-  for (const auto& r : refs) parts.insert(r.part);
+  for (const auto& t : targets) parts.insert(t.source.part);
+  std::vector<unsigned char> strip;
   for (int p : parts) {
     int lo = INT32_MAX, hi = -1;
-    for (const auto& r : refs)
-      if (r.part == p) lo = std::min(lo, r.index), hi = std::max(hi, r.index);
-    const int span = hi - lo + 1;
+    for (const auto& t : targets)
+      if (t.source.part == p) lo = std::min(lo, t.source.index), hi = std::max(hi, t.source.index);
     const OIIO::ImageSpec& spec = table.parts[p].spec;
     const int x0 = std::max(spec.x, window.x),
               x1 = std::min(spec.x + spec.width, window.x + window.width);
     const int y0 = std::max(spec.y, window.y),
               y1 = std::min(spec.y + spec.height, window.y + window.height);
     if (x0 >= x1 || y0 >= y1) continue;
+    const StripLayout layout = stripLayout(spec, lo, hi + 1);
     const int rows = stripRows(spec);
-    std::vector<float> strip(static_cast<std::size_t>(spec.width) * rows * span);
+    const std::size_t rowBytes = std::size_t(spec.width) * layout.pixelBytes;
+    strip.resize(rowBytes * rows);
     for (int ys = spec.y + (y0 - spec.y) / rows * rows; ys < y1; ys += rows) {
       const int ye = std::min(spec.y + spec.height, ys + rows);
-      if (!readStrip(in, p, spec, ys, ye, lo, hi + 1, strip.data()))
+      if (!readStrip(in, p, spec, ys, ye, lo, hi + 1, layout.request, strip.data()))
         fail(path, "corrupt or truncated image data (" + firstLine(in.geterror()) + ")");
-      for (std::size_t k = 0; k < refs.size(); ++k) {
-        if (refs[k].part != p) continue;
-        const int offset = refs[k].index - lo;
-        for (int y = std::max(ys, y0); y < std::min(ye, y1); ++y)
-          for (int x = x0; x < x1; ++x)
-            image.at(x - window.x, y - window.y, static_cast<int>(k)) =
-                strip[(static_cast<std::size_t>(y - ys) * spec.width + (x - spec.x)) * span +
-                      offset];
-      }
+      // Row by row, so that the row stays in cache while every channel is taken from it.
+      for (int y = std::max(ys, y0); y < std::min(ye, y1); ++y)
+        for (const auto& t : targets) {
+          if (t.source.part != p) continue;
+          const int c = t.source.index - lo;
+          const unsigned char* from = strip.data() + std::size_t(y - ys) * rowBytes +
+                                      std::size_t(x0 - spec.x) * layout.pixelBytes +
+                                      layout.offset[c];
+          float* to =
+              t.first + (std::size_t(y - window.y) * window.width + (x0 - window.x)) * t.stride;
+          if (layout.half[c])
+            scatter<Imath::half>(from, layout.pixelBytes, x1 - x0, to, t.stride);
+          else
+            scatter<float>(from, layout.pixelBytes, x1 - x0, to, t.stride);
+        }
     }
   }
-  return image;
+  return images;
+}
+
+Image readChannels(OIIO::ImageInput& in, const ChannelTable& table, const std::string& path,
+                   const std::vector<std::string>& names, const PixelWindow& window) {
+  return std::move(readChannelGroups(in, table, path, {names}, window).front());
 }
 
 // Temporary name in the destination's folder with the same extension, so the
@@ -522,35 +586,27 @@ FrameBuffers readLocated(OIIO::ImageInput& in, const ChannelTable& table, const 
   // decompressed with every other channel of its part, so a read per buffer
   // decompressed a 57-layer 1080p frame 15 times (half of `-q fast`'s CPU time).
   std::vector<const Located*> wanted;
-  std::vector<std::string> names;
+  std::vector<std::vector<std::string>> groups;
   for (const auto& l : located)
     if (options.only.empty() ||
         std::find(options.only.begin(), options.only.end(), l.buffer) != options.only.end()) {
       wanted.push_back(&l);
-      names.insert(names.end(), l.channels.begin(), l.channels.end());
+      groups.push_back(l.channels);
     }
   const std::string alpha = alphaChannelOf(table, *color);
-  if (!alpha.empty()) names.push_back(alpha);
-  const Image together = readChannels(in, table, path, names, frame.dataWindow);
-  int first = 0;
-  auto nextChannels = [&](int count) {
-    Image image(together.width, together.height, count);
-    for (std::size_t i = 0; i < image.pixelCount(); ++i)
-      std::copy_n(&together.pixels[i * together.channels + first], count, &image.pixels[i * count]);
-    first += count;
-    return image;
-  };
-  for (const Located* l : wanted) {
-    const std::string& name = l->buffer;
-    const std::vector<std::string>& channels = l->channels;
-    Image image = nextChannels(static_cast<int>(channels.size()));
+  if (!alpha.empty()) groups.push_back({alpha});
+  std::vector<Image> images = readChannelGroups(in, table, path, groups, frame.dataWindow);
+  for (std::size_t i = 0; i < wanted.size(); ++i) {
+    const std::string& name = wanted[i]->buffer;
+    const std::vector<std::string>& channels = wanted[i]->channels;
+    Image& image = images[i];
     const OIIO::ImageSpec& spec = table.partOf(channels.front()).spec;
     if (name == "color" || name == "albedo") linearizeIfSrgb(image, spec, name, frame.notes);
     if (name == "normal") decodeNormals(image, channels, frame.notes);
     frame.buffers[name] = std::move(image);
     frame.sourceChannels[name] = channels;
   }
-  if (!alpha.empty()) frame.alpha = nextChannels(1);
+  if (!alpha.empty()) frame.alpha = std::move(images.back());
   if (color->front().find("Noisy Image") != std::string::npos)
     frame.notes.push_back("color: from '" + color->front().substr(0, color->front().rfind('.')) +
                           "' (Cycles' own denoiser ran, so Combined is already denoised)");
@@ -895,8 +951,9 @@ void writePart(OIIO::ImageInput& in, OIIO::ImageOutput& out, const OutputPart& p
   std::vector<float> outStrip(static_cast<std::size_t>(spec.width) * rows * spec.nchannels);
   for (int y0 = spec.y; y0 < spec.y + spec.height; y0 += rows) {
     const int y1 = std::min(spec.y + spec.height, y0 + rows);
-    if (part.sourcePart >= 0 && !readStrip(in, part.sourcePart, table.parts[part.sourcePart].spec,
-                                           y0, y1, 0, inChannels, inStrip.data()))
+    if (part.sourcePart >= 0 &&
+        !readStrip(in, part.sourcePart, table.parts[part.sourcePart].spec, y0, y1, 0, inChannels,
+                   OIIO::TypeDesc::FLOAT, inStrip.data()))
       fail(sourcePath, "corrupt or truncated image data (" + firstLine(in.geterror()) + ")");
     for (int y = y0; y < y1; ++y)
       for (int x = spec.x; x < spec.x + spec.width; ++x) {
