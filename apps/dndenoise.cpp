@@ -611,7 +611,7 @@ ReadOptions readInputHeader(const Options& o, const Denoiser& denoiser, const st
   // Without a colour, readFrame says what is wrong.
   if (std::find(has.begin(), has.end(), "color") != has.end()) {
     checkModelInputs(denoiser, input, has);
-    read.only = denoiser.usableBuffers(has);
+    read.only = denoiser.buffersToRead(has, o.denoise);
   }
   return read;
 }

@@ -56,6 +56,11 @@ std::vector<std::string> Denoiser::usableBuffers(const std::vector<std::string>&
   return pipeline_->usableBuffers(available);
 }
 
+std::vector<std::string> Denoiser::buffersToRead(const std::vector<std::string>& available,
+                                                const DenoiseOptions& options) const {
+  return pipeline_->buffersToRead(available, options);
+}
+
 bool Denoiser::controlApplies(const std::vector<std::string>& available) const {
   const auto* oidn = dynamic_cast<const OidnPipeline*>(pipeline_.get());
   return oidn && oidn->controlApplies(available);

@@ -26,7 +26,7 @@ torch::Tensor highPass(const torch::Tensor& x) {
 
 std::vector<std::string> featureBuffers(const FrameBuffers& frame) {
   std::vector<std::string> features;
-  for (const char* name : {"albedo", "normal", "depth"})
+  for (const auto& name : noiseFeatureBuffers())
     if (frame.has(name)) features.push_back(name);
   return features;
 }
@@ -43,6 +43,11 @@ torch::Tensor flatPixels(const FrameBuffers& frame, const std::vector<std::strin
 }
 
 }  // namespace
+
+const std::vector<std::string>& noiseFeatureBuffers() {
+  static const std::vector<std::string> names = {"albedo", "normal", "depth"};
+  return names;
+}
 
 NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
                            const FrameBuffers& frame) {

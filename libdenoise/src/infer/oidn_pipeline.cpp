@@ -104,7 +104,7 @@ OidnPipeline::OidnPipeline(const ModelInfo& info, OidnBase base, OidnControlled 
 
 std::vector<std::string> OidnPipeline::missingBuffers(
     const std::vector<std::string>& available) const {
-  return base_->pick(available).second ? std::vector<std::string>{}
+  return base_->pickSet(available) ? std::vector<std::string>{}
                                        : std::vector<std::string>{"color"};
 }
 
@@ -122,7 +122,7 @@ std::vector<std::string> OidnPipeline::usableBuffers(
     usable = oidnInputSet(info_.oidn.control.input_set).buffers;
     for (const auto& name : info_.oidn.control.extra_buffers)
       if (contains(available, name)) usable.push_back(name);
-  } else if (const OidnInputSet* set = base_->pick(available).second) {
+  } else if (const OidnInputSet* set = base_->pickSet(available)) {
     usable = set->buffers;
   }
   // The light-path split reads the diffuse passes (DenoiseOptions::lightPaths).
@@ -133,6 +133,21 @@ std::vector<std::string> OidnPipeline::usableBuffers(
     for (const auto& name : passes)
       if (!contains(usable, name)) usable.push_back(name);
   return usable;
+}
+
+std::vector<std::string> OidnPipeline::buffersToRead(const std::vector<std::string>& available,
+                                                    const DenoiseOptions& options) const {
+  const std::vector<std::string> usable = usableBuffers(available);
+  const OidnInputSet* set = base_->pickSet(available);
+  std::vector<std::string> read = set ? set->buffers : std::vector<std::string>{};
+  auto add = [&](const std::vector<std::string>& names) {
+    for (const auto& name : names)
+      if (contains(usable, name) && !contains(read, name)) read.push_back(name);
+  };
+  if (options.prefilter && options.lightPaths) add(diffusePassBuffers());
+  if (controlApplies(available) && options.control == ControlUse::Auto) add(noiseFeatureBuffers());
+  if (controlApplies(available) && options.control == ControlUse::Always) add(usable);
+  return read;
 }
 
 double OidnPipeline::bytesPerPixel() const {
@@ -147,11 +162,14 @@ DenoiseResult OidnPipeline::denoise(const FrameBuffers& frame,
                                     const DenoiseOptions& options) const {
   OidnBase(base_)->useBFloat16(options.bfloat16);  // a setting of the networks' calls
   const bool control = controlApplies(frame.names());
-  if (control && options.control == ControlUse::Always) return denoiseWithControl(frame, options);
+  // The Control Module's extra buffers are read when it steers (FrameBuffers::unread).
+  const std::vector<std::string>& extras = info_.oidn.control.extra_buffers;
+  if (control && options.control == ControlUse::Always)
+    return denoiseWithControl(withUnread(frame, extras), options);
   DenoiseResult result = denoiseWithBase(frame, options);
   if (!control || options.control != ControlUse::Auto || !correlatedNoiseLeft(*result.noiseLeft))
     return result;
-  DenoiseResult steered = denoiseWithControl(frame, options);
+  DenoiseResult steered = denoiseWithControl(withUnread(frame, extras), options);
   steered.noiseLeft = result.noiseLeft;
   return steered;
 }
@@ -197,9 +215,10 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
 DenoiseResult OidnPipeline::denoiseWithControl(const FrameBuffers& frame,
                                                const DenoiseOptions& options) const {
   c10::InferenceMode inference;
+  const OidnControlConfig& config = info_.oidn.control;
+  base_->net(config.input_set);  // the steered network, handed out: in the base's weight layout
   OidnControlled model = controlled_;
   model->to(options.device);
-  const OidnControlConfig& config = info_.oidn.control;
   const OidnInputSet& set = oidnInputSet(config.input_set);
   const std::vector<double> sigmas =
       config.diffusion ? options.sigmas.value_or(info_.oidn.sigmas) : std::vector<double>{};

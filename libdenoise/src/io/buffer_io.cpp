@@ -657,7 +657,8 @@ std::vector<std::string> availableBuffers(const std::string& path, const ReadOpt
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
   auto in = openInput(path);
   ChannelTable table = scanChannels(*in, path);
-  FrameBuffers frame = readLocated(*in, table, path, locateBuffers(table, path, options), options);
+  const std::vector<Located> located = locateBuffers(table, path, options);
+  FrameBuffers frame = readLocated(*in, table, path, located, options);
   if (!frame.has("color")) {
     std::vector<std::string> all = table.ordered;
     if (all.size() > 12) all.resize(12), all.push_back("...");
@@ -668,6 +669,16 @@ FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
     if (!frame.has(name)) fail(path, "has no '" + name + "' buffer");
   frame.samplesPerPixel = recordedSamples(
       table.partOf(frame.sourceChannels.at("color").front()).spec, layerPrefixOf(frame));
+  for (const auto& l : located)
+    if (!frame.has(l.buffer)) frame.unread.push_back(l.buffer);
+  if (!frame.unread.empty())
+    frame.readUnread = [path, options](const std::vector<std::string>& names) {
+      ReadOptions more = options;
+      more.only = names;
+      auto again = openInput(path);
+      const ChannelTable table = scanChannels(*again, path);
+      return readLocated(*again, table, path, locateBuffers(table, path, more), more).buffers;
+    };
   return frame;
 }
 

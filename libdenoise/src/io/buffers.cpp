@@ -1,5 +1,6 @@
 #include "dn/io/buffers.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace dn {
@@ -119,6 +120,20 @@ std::vector<std::string> FrameBuffers::names() const {
   for (const auto& spec : canonicalBuffers())  // canonical order, not map order
     if (has(spec.name)) out.push_back(spec.name);
   return out;
+}
+
+FrameBuffers withUnread(const FrameBuffers& frame, const std::vector<std::string>& names) {
+  std::vector<std::string> wanted;
+  for (const auto& name : names)
+    if (std::find(frame.unread.begin(), frame.unread.end(), name) != frame.unread.end())
+      wanted.push_back(name);
+  FrameBuffers more = frame;
+  if (wanted.empty() || !frame.readUnread) return more;
+  for (auto& [name, image] : frame.readUnread(wanted)) {
+    more.buffers[name] = std::move(image);
+    more.unread.erase(std::find(more.unread.begin(), more.unread.end(), name));
+  }
+  return more;
 }
 
 std::string layerPrefixOf(const FrameBuffers& frame, const std::string& buffer) {

@@ -247,6 +247,11 @@ OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputS
 
 std::pair<OidnUNet, const OidnInputSet*> OidnBaseImpl::pick(
     const std::vector<std::string>& available) const {
+  const OidnInputSet* set = pickSet(available);
+  return {set ? net(set->name) : OidnUNet(nullptr), set};
+}
+
+const OidnInputSet* OidnBaseImpl::pickSet(const std::vector<std::string>& available) const {
   auto has = [&](const std::string& b) {
     return std::find(available.begin(), available.end(), b) != available.end();
   };
@@ -255,15 +260,21 @@ std::pair<OidnUNet, const OidnInputSet*> OidnBaseImpl::pick(
     if (set.denoised() == "color" && !set.cleanAux && nets_.count(set.name) &&
         std::all_of(set.buffers.begin(), set.buffers.end(), has))
       best = &set;  // sets are listed poorest first
-  if (!best) return {OidnUNet(nullptr), nullptr};
-  return {nets_.at(best->name), best};
+  return best;
 }
 
 bool OidnBaseImpl::canPrefilter() const {
   return nets_.count("alb") && nets_.count("nrm") && nets_.count("hdr_calb_cnrm_large");
 }
 
-OidnUNet OidnBaseImpl::net(const std::string& inputSet) const { return nets_.at(inputSet); }
+OidnUNet OidnBaseImpl::net(const std::string& inputSet) const {
+  return handedOut(nets_.at(inputSet));
+}
+
+OidnUNet OidnBaseImpl::handedOut(OidnUNet net) const {
+  if (channelsLast_) net->useChannelsLast();
+  return net;
+}
 
 void OidnBaseImpl::useBFloat16(bool on) {
   for (auto& [name, net] : nets_) net->useBFloat16(on);
@@ -279,10 +290,13 @@ bool cpuHasBFloat16Matrix() {
 #endif
 }
 
-void OidnBaseImpl::useChannelsLast() {
+void OidnUNetImpl::useChannelsLast() {
+  if (channelsLast_) return;
+  c10::InferenceMode normalTensors(false);  // weights, even when first used in inference mode
   torch::NoGradGuard noGrad;
   for (auto& p : parameters())
     if (p.dim() == 4) p.set_data(p.contiguous(torch::MemoryFormat::ChannelsLast));
+  channelsLast_ = true;
 }
 
 }  // namespace dn

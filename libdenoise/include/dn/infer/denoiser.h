@@ -34,6 +34,10 @@ class Denoiser {
   std::vector<std::string> missingBuffers(const std::vector<std::string>& available) const;
   // The buffers the model would use from `available`, colour first.
   std::vector<std::string> usableBuffers(const std::vector<std::string>& available) const;
+  // Those of usableBuffers to read before denoising with `options`: a path that
+  // needs more reads it then from FrameBuffers::unread.
+  std::vector<std::string> buffersToRead(const std::vector<std::string>& available,
+                                         const DenoiseOptions& options) const;
   // Whether a Control Module steers the base on a render with these buffers
   // (it needs its base network's inputs; its extra buffers may be missing).
   bool controlApplies(const std::vector<std::string>& available) const;

@@ -16,6 +16,9 @@ namespace dn {
 // own (albedo and normals in [0, 1] / [-1, 1] units) and is left out.
 constexpr double kFeatureEdge = 0.05;
 
+// The feature buffers whose edges and texture the measurements leave out.
+const std::vector<std::string>& noiseFeatureBuffers();
+
 // Root mean square noise of `image` (1,C,H,W; the frame's radiance, in the
 // space the noise is wanted in), from the high-pass residual of Immerkaer's 3x3
 // operator, scaled so that independent noise of standard deviation s gives s

@@ -38,6 +38,10 @@ class OidnPipeline : public Pipeline {
 
   std::vector<std::string> missingBuffers(const std::vector<std::string>& available) const override;
   std::vector<std::string> usableBuffers(const std::vector<std::string>& available) const override;
+  // The base network's buffers, the gate's depth, the diffuse passes with the
+  // split; the Control Module's extras only when it steers whatever the gate says.
+  std::vector<std::string> buffersToRead(const std::vector<std::string>& available,
+                                         const DenoiseOptions& options) const override;
   double bytesPerPixel() const override;
   DenoiseResult denoise(const FrameBuffers& frame, const DenoiseOptions& options) const override;
 

@@ -19,6 +19,12 @@ class Pipeline {
   // The buffers it would read from `available`, colour first.
   virtual std::vector<std::string> usableBuffers(
       const std::vector<std::string>& available) const = 0;
+  // Those of usableBuffers to read before denoising with `options`; the others
+  // are read when a path needs them (FrameBuffers::unread).
+  virtual std::vector<std::string> buffersToRead(const std::vector<std::string>& available,
+                                                 const DenoiseOptions&) const {
+    return usableBuffers(available);
+  }
   // Estimated activation bytes per pixel of one network evaluation (for tiling).
   virtual double bytesPerPixel() const = 0;
   // The frame has every buffer it needs; options are checked here.

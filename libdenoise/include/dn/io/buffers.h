@@ -2,6 +2,7 @@
 // names its channels. Buffer I/O (dn/buffer_io.h) fills it from files.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -66,11 +67,19 @@ struct FrameBuffers {
   // Samples per pixel the renderer recorded in the file (Cycles writes
   // "cycles.<view layer>.samples"); 0 when unknown.
   int samplesPerPixel = 0;
+  // Buffers of the source left out of the first read, and how to read them
+  // (dn/io/buffer_io.h sets both): a pipeline reads what only one of its paths
+  // needs when it takes that path, e.g. the Control Module's extra buffers.
+  std::vector<std::string> unread;
+  std::function<std::map<std::string, Image>(const std::vector<std::string>&)> readUnread;
 
   bool has(const std::string& name) const { return buffers.count(name) != 0; }
   const Image& get(const std::string& name) const;  // throws std::out_of_range naming the buffer
   std::vector<std::string> names() const;
 };
+
+// `frame` with those of `names` it left unread read now (FrameBuffers::unread).
+FrameBuffers withUnread(const FrameBuffers& frame, const std::vector<std::string>& names);
 
 // The layer prefix the colour came from ("ViewLayer." for Blender, "" for plain
 // RGB), so results can be written as a sibling pass: prefix + "Denoised".

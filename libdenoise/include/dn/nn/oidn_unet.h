@@ -75,6 +75,8 @@ class OidnUNetImpl : public torch::nn::Module {
     bfloat16Weights_.clear();  // the float weights may have changed since
   }
   bool usesBFloat16() const { return bfloat16_; }
+  // Weights in channels-last order: faster convolutions on the CPU. Once.
+  void useChannelsLast();
 
  private:
   struct Weights {
@@ -93,6 +95,7 @@ class OidnUNetImpl : public torch::nn::Module {
   std::vector<std::vector<std::string>> decoder_;  // per level, after upsampling and concat
   std::map<std::string, torch::nn::Conv2d> convs_;
   bool bfloat16_ = false;
+  bool channelsLast_ = false;
   std::map<std::string, Weights> bfloat16Weights_;
 };
 TORCH_MODULE(OidnUNet);
@@ -122,18 +125,24 @@ class OidnBaseImpl : public torch::nn::Module {
   // The colour network for the richest set whose buffers are all in `available`
   // (noisy aux), and its set; nullptr when none fits (no colour).
   std::pair<OidnUNet, const OidnInputSet*> pick(const std::vector<std::string>& available) const;
+  const OidnInputSet* pickSet(const std::vector<std::string>& available) const;  // pick's set
   // Whether the base holds the three networks of the prefilter mode.
   bool canPrefilter() const;
   OidnUNet net(const std::string& inputSet) const;  // throws std::out_of_range
   const std::vector<std::string>& inputSets() const { return sets_; }
-  // Weights in channels-last order: faster convolutions on the CPU.
-  void useChannelsLast();
+  // Weights in channels-last order: faster convolutions on the CPU. Each
+  // network is converted when net() or pick() first hands it out, so that a
+  // run converts only the networks it uses.
+  void useChannelsLast() { channelsLast_ = true; }
   // Every network's inner convolutions in bfloat16 (OidnUNetImpl::useBFloat16).
   void useBFloat16(bool on);
 
  private:
+  OidnUNet handedOut(OidnUNet net) const;
+
   std::vector<std::string> sets_;
   std::map<std::string, OidnUNet> nets_;
+  bool channelsLast_ = false;
 };
 TORCH_MODULE(OidnBase);
 
