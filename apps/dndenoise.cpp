@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -28,6 +29,7 @@
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/io/preview_io.h"
+#include "dn/io/sha256.h"
 #include "dn/metrics.h"
 #include "dn/nn/reusing_allocator.h"
 #include "dn/parallel.h"
@@ -654,6 +656,8 @@ int run(Options o, int argc, char** argv) {
   // again, within the peak the networks reach anyway (dn/nn/reusing_allocator.h).
   useReusingCpuAllocator(static_cast<std::size_t>(o.denoise.maxMemoryBytes));
   const auto loadStart = Clock::now();
+  // The checksum for the outputs' metadata, on the core the loading leaves idle.
+  auto modelSha256 = std::async(std::launch::async, [&] { return sha256OfFile(o.model); });
   Denoiser denoiser = [&] {
     try {
       return Denoiser::fromFile(o.model);
@@ -665,7 +669,7 @@ int run(Options o, int argc, char** argv) {
   if (o.verbose)
     fmt::print(stderr, "dndenoise: model {} loaded in {:.2f} s\n", o.model,
                std::chrono::duration<double>(Clock::now() - loadStart).count());
-  cli::setToolProvenance("dndenoise", argc, argv, o.model);
+  cli::setToolProvenance("dndenoise", argc, argv, o.model, modelSha256.get());
   const Image ref = o.reference.empty() ? Image() : readReference(o);
   // Every input's header before the first frame: a bad frame 90 fails now, not in an hour.
   for (const auto& [input, output] : jobs) {

@@ -93,3 +93,32 @@ TEST_CASE("the noise a denoiser leaves, as a fraction of its input's") {
   CHECK(measureNoiseLeft(torch::rand({1, 3, 2, 2}), torch::rand({1, 3, 2, 2}), none).fraction() ==
         0.0);
 }
+
+TEST_CASE("the noise left is measured where the features are flat, as a convolution gives it") {
+  // Albedo flat on the left half, textured on the right; the output keeps a
+  // fifth of the noise on the left and all of it on the right.
+  const int64_t h = 70, w = 90;
+  auto albedo = torch::full({1, 3, h, w}, 0.5);
+  albedo.narrow(3, 45, 45).add_(gaussian(h, 45, 0.2, 9));
+  const FrameBuffers frame = frameWith(albedo);
+  const auto clean = ramp(h, w), noise = gaussian(h, w, 0.1, 10);
+  auto left = torch::full({1, 1, 1, w}, 1.0);
+  left.narrow(3, 45, 45).fill_(0.2);
+  const auto input = clean + noise, output = clean + noise * (1.2 - left);
+  // The reference: Immerkaer's kernel as a convolution, the albedo's edges masked.
+  const auto kernel =
+      torch::tensor({1.0, -2.0, 1.0, -2.0, 4.0, -2.0, 1.0, -2.0, 1.0}).view({1, 1, 3, 3}) / 6.0;
+  auto highPass = [&](const torch::Tensor& x) {
+    return torch::nn::functional::conv2d(
+        x, kernel.expand({3, 1, 3, 3}).to(x.dtype()),
+        torch::nn::functional::Conv2dFuncOptions().groups(3));
+  };
+  const torch::Tensor flat = std::get<0>(highPass(albedo).abs().max(1, true)) < kFeatureEdge;
+  auto energy = [&](const torch::Tensor& x) {
+    const torch::Tensor masked = highPass(x).square() * flat;
+    return masked.sum().template item<double>();
+  };
+  const NoiseLeft measured = measureNoiseLeft(input, output, frame);
+  CHECK(measured.fraction() == doctest::Approx(std::sqrt(energy(output) / energy(input))).epsilon(1e-5));
+  CHECK(measured.fraction() == doctest::Approx(0.2).epsilon(0.05));
+}

@@ -48,14 +48,16 @@ std::string commandLine(int argc, char** argv) {
   return out;
 }
 
-void setToolProvenance(const std::string& tool, int argc, char** argv, const std::string& model) {
+void setToolProvenance(const std::string& tool, int argc, char** argv, const std::string& model,
+                       std::string modelSha256) {
   const std::string software = fmt::format("{} {} ({})", tool, DN_PROJECT_VERSION, DN_GIT_DESCRIBE);
   const std::string command = commandLine(argc, argv);
   Attributes attributes = {
       {"Software", software}, {"ImageHistory", software + ": " + command}, {"dn:command", command}};
   if (!model.empty()) {
     attributes.emplace_back("dn:model", fs::path(model).filename().string());
-    attributes.emplace_back("dn:model_sha256", sha256OfFile(model));
+    attributes.emplace_back("dn:model_sha256",
+                            modelSha256.empty() ? sha256OfFile(model) : std::move(modelSha256));
   }
   setProvenance(std::move(attributes));
 }

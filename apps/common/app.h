@@ -19,9 +19,10 @@ Components commonComponents();
 std::string commandLine(int argc, char** argv);
 
 // Software, ImageHistory and dn:* attributes for every image the process
-// writes; `model` may be empty (dnmetrics). Reads the model to checksum it.
+// writes; `model` may be empty (dnmetrics). Reads the model to checksum it
+// unless given its sha256.
 void setToolProvenance(const std::string& tool, int argc, char** argv,
-                       const std::string& model = "");
+                       const std::string& model = "", std::string modelSha256 = "");
 
 // $DN_MODEL, else default.dnm in $DN_MODEL_DIR, beside the build tree's
 // executables (<exe dir>/../models) or in the install tree

@@ -49,31 +49,95 @@ const std::vector<std::string>& noiseFeatureBuffers() {
   return names;
 }
 
+namespace {
+
+// Immerkaer's residual at x of three consecutive rows, as highPass gives it.
+inline float residual(const float* up, const float* mid, const float* down, int64_t x) {
+  const float a = up[x - 1] - 2 * up[x] + up[x + 1];
+  const float b = mid[x - 1] - 2 * mid[x] + mid[x + 1];
+  const float c = down[x - 1] - 2 * down[x] + down[x + 1];
+  return (a - 2 * b + c) / 6.0f;
+}
+
+struct NoiseSums {
+  double allInput = 0, allOutput = 0, flatInput = 0, flatOutput = 0, flatPixels = 0;
+};
+
+// The high-pass energy of input and output over interior rows [y0, y1); pixels
+// where a feature has an edge count only in the `all` sums. The images are
+// planes of one row-major (C, height, width) block each; `guide` has
+// `guideChannels` planes (none: no features).
+NoiseSums noiseSums(const float* input, const float* output, int64_t channels, const float* guide,
+                    int64_t guideChannels, int64_t height, int64_t width, int64_t y0, int64_t y1) {
+  const int64_t plane = height * width;
+  NoiseSums sums;
+  for (int64_t y = y0; y < y1; ++y)
+    for (int64_t x = 1; x + 1 < width; ++x) {
+      double in = 0, out = 0;
+      for (int64_t c = 0; c < channels; ++c) {
+        const float* i = input + c * plane + (y - 1) * width;
+        const float* o = output + c * plane + (y - 1) * width;
+        const float ri = residual(i, i + width, i + 2 * width, x);
+        const float ro = residual(o, o + width, o + 2 * width, x);
+        in += ri * ri;
+        out += ro * ro;
+      }
+      sums.allInput += in;
+      sums.allOutput += out;
+      if (guideChannels == 0) continue;
+      float edge = 0;
+      for (int64_t g = 0; g < guideChannels; ++g) {
+        const float* r = guide + g * plane + (y - 1) * width;
+        edge = std::max(edge, std::abs(residual(r, r + width, r + 2 * width, x)));
+      }
+      if (edge < static_cast<float>(kFeatureEdge)) {
+        sums.flatInput += in;
+        sums.flatOutput += out;
+        sums.flatPixels += 1;
+      }
+    }
+  return sums;
+}
+
+}  // namespace
+
 NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
                            const FrameBuffers& frame) {
-  torch::NoGradGuard noGrad;
   const std::vector<std::string> features = featureBuffers(frame);
-  const int64_t height = input.size(2), width = input.size(3);
+  const torch::Tensor in = input.to(torch::kFloat32).contiguous();
+  const torch::Tensor out = output.to(torch::kFloat32).contiguous();
+  const int64_t channels = in.size(1), height = in.size(2), width = in.size(3);
   if (height < 3 || width < 3) return {};
-  NoiseLeft flat, all;
-  double flatCount = 0, allCount = 0;
-  for (int64_t y0 = 0; y0 + 2 < height; y0 += kStripRows) {
-    const int64_t rows = std::min(kStripRows + 2, height - y0);
-    // Single precision per pixel (a ratio of sums is wanted), double sums.
-    const auto in = highPass(input.narrow(2, y0, rows).to(torch::kFloat32)).square_();
-    const auto out = highPass(output.narrow(2, y0, rows).to(torch::kFloat32)).square_();
-    all.input += in.sum(torch::kFloat64).item<double>();
-    all.output += out.sum(torch::kFloat64).item<double>();
-    allCount += double(in.size(2) * in.size(3));
-    if (features.empty()) continue;
-    const auto mask = flatPixels(frame, features, y0, rows);
-    flat.input += (in * mask).sum(torch::kFloat64).item<double>();
-    flat.output += (out * mask).sum(torch::kFloat64).item<double>();
-    flatCount += mask.sum(torch::kFloat64).item<double>();
+  // The features as the model sees them (one pass over the frame, vectorized).
+  const torch::Tensor guide =
+      features.empty()
+          ? torch::Tensor()
+          : normalizedAuxRegion(frame, features, tonemap::Curve::Log, 0, 0, height, width, 1.0)
+                .contiguous();
+  // Blocks of rows in parallel, each with its own sums.
+  constexpr int64_t kBlockRows = 16;
+  const int64_t blocks = (height - 2 + kBlockRows - 1) / kBlockRows;
+  std::vector<NoiseSums> parts(static_cast<std::size_t>(blocks));
+  at::parallel_for(0, blocks, 1, [&](int64_t first, int64_t last) {
+    for (int64_t b = first; b < last; ++b)
+      parts[b] = noiseSums(in.data_ptr<float>(), out.data_ptr<float>(), channels,
+                           guide.defined() ? guide.data_ptr<float>() : nullptr,
+                           guide.defined() ? guide.size(1) : 0, height, width,
+                           1 + b * kBlockRows, std::min(height - 1, 1 + (b + 1) * kBlockRows));
+  });
+  NoiseSums sum;
+  for (const auto& p : parts) {
+    sum.allInput += p.allInput;
+    sum.allOutput += p.allOutput;
+    sum.flatInput += p.flatInput;
+    sum.flatOutput += p.flatOutput;
+    sum.flatPixels += p.flatPixels;
   }
-  NoiseLeft left = flatCount >= kMinMaskedFraction * allCount ? flat : all;
-  left.input = std::sqrt(left.input);
-  left.output = std::sqrt(left.output);
+  const double pixels = double(height - 2) * double(width - 2);
+  const bool flat = sum.flatPixels >= kMinMaskedFraction * pixels;
+  NoiseLeft left;
+  left.input = std::sqrt(flat ? sum.flatInput : sum.allInput);
+  left.output = std::sqrt(flat ? sum.flatOutput : sum.allOutput);
   return left;
 }
 
