@@ -109,9 +109,8 @@ TEST_CASE("the noise left is measured where the features are flat, as a convolut
   const auto kernel =
       torch::tensor({1.0, -2.0, 1.0, -2.0, 4.0, -2.0, 1.0, -2.0, 1.0}).view({1, 1, 3, 3}) / 6.0;
   auto highPass = [&](const torch::Tensor& x) {
-    return torch::nn::functional::conv2d(
-        x, kernel.expand({3, 1, 3, 3}).to(x.dtype()),
-        torch::nn::functional::Conv2dFuncOptions().groups(3));
+    return torch::nn::functional::conv2d(x, kernel.expand({3, 1, 3, 3}).to(x.dtype()),
+                                         torch::nn::functional::Conv2dFuncOptions().groups(3));
   };
   const torch::Tensor flat = std::get<0>(highPass(albedo).abs().max(1, true)) < kFeatureEdge;
   auto energy = [&](const torch::Tensor& x) {
@@ -119,6 +118,7 @@ TEST_CASE("the noise left is measured where the features are flat, as a convolut
     return masked.sum().template item<double>();
   };
   const NoiseLeft measured = measureNoiseLeft(input, output, frame);
-  CHECK(measured.fraction() == doctest::Approx(std::sqrt(energy(output) / energy(input))).epsilon(1e-5));
+  CHECK(measured.fraction() ==
+        doctest::Approx(std::sqrt(energy(output) / energy(input))).epsilon(1e-5));
   CHECK(measured.fraction() == doctest::Approx(0.2).epsilon(0.05));
 }

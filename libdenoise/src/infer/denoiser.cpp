@@ -57,7 +57,7 @@ std::vector<std::string> Denoiser::usableBuffers(const std::vector<std::string>&
 }
 
 std::vector<std::string> Denoiser::buffersToRead(const std::vector<std::string>& available,
-                                                const DenoiseOptions& options) const {
+                                                 const DenoiseOptions& options) const {
   return pipeline_->buffersToRead(available, options);
 }
 

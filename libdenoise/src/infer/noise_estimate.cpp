@@ -122,8 +122,8 @@ NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& outp
     for (int64_t b = first; b < last; ++b)
       parts[b] = noiseSums(in.data_ptr<float>(), out.data_ptr<float>(), channels,
                            guide.defined() ? guide.data_ptr<float>() : nullptr,
-                           guide.defined() ? guide.size(1) : 0, height, width,
-                           1 + b * kBlockRows, std::min(height - 1, 1 + (b + 1) * kBlockRows));
+                           guide.defined() ? guide.size(1) : 0, height, width, 1 + b * kBlockRows,
+                           std::min(height - 1, 1 + (b + 1) * kBlockRows));
   });
   NoiseSums sum;
   for (const auto& p : parts) {

@@ -104,8 +104,7 @@ OidnPipeline::OidnPipeline(const ModelInfo& info, OidnBase base, OidnControlled 
 
 std::vector<std::string> OidnPipeline::missingBuffers(
     const std::vector<std::string>& available) const {
-  return base_->pickSet(available) ? std::vector<std::string>{}
-                                       : std::vector<std::string>{"color"};
+  return base_->pickSet(available) ? std::vector<std::string>{} : std::vector<std::string>{"color"};
 }
 
 bool OidnPipeline::controlApplies(const std::vector<std::string>& available) const {
@@ -136,7 +135,7 @@ std::vector<std::string> OidnPipeline::usableBuffers(
 }
 
 std::vector<std::string> OidnPipeline::buffersToRead(const std::vector<std::string>& available,
-                                                    const DenoiseOptions& options) const {
+                                                     const DenoiseOptions& options) const {
   const std::vector<std::string> usable = usableBuffers(available);
   const OidnInputSet* set = base_->pickSet(available);
   std::vector<std::string> read = set ? set->buffers : std::vector<std::string>{};

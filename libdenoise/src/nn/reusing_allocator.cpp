@@ -1,11 +1,15 @@
 #include "dn/nn/reusing_allocator.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <map>
 #include <mutex>
+#include <new>
 
 #include <c10/core/Allocator.h>
 #include <c10/core/impl/alloc_cpu.h>
+
+#include <sys/mman.h>
 
 namespace dn {
 namespace {
@@ -14,6 +18,21 @@ constexpr std::size_t kMinCachedBlock = std::size_t(1) << 20;
 // The block's size sits in front of its data, so that a raw pointer can be
 // freed (Allocator::raw_deleter) and the data stays 64-byte aligned.
 constexpr std::size_t kHeader = 64;
+
+// Large blocks in transparent huge pages where the kernel grants them: a
+// 1080p network's activations otherwise fault in 4 KiB at a time, which was a
+// fifth of -q fast's CPU time, most of it in the kernel.
+constexpr std::size_t kHugePage = std::size_t(2) << 20;
+
+void* allocHuge(std::size_t bytes) {
+  const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+  void* block = std::aligned_alloc(kHugePage, rounded);
+  if (!block) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+  madvise(block, rounded, MADV_HUGEPAGE);  // advice only: ignored where unsupported
+#endif
+  return block;
+}
 
 class ReusingCpuAllocator final : public c10::Allocator {
  public:
@@ -55,7 +74,8 @@ class ReusingCpuAllocator final : public c10::Allocator {
       while (live_ + cached_ > highWater_ && !free_.empty()) evict();
       highWater_ = std::max(highWater_, live_ + cached_);
     }
-    auto* block = static_cast<char*>(c10::alloc_cpu(bytes + kHeader));
+    auto* block = static_cast<char*>(bytes >= kHugePage ? allocHuge(bytes + kHeader)
+                                                        : c10::alloc_cpu(bytes + kHeader));
     *reinterpret_cast<std::size_t*>(block) = bytes;
     return block + kHeader;
   }
