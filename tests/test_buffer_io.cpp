@@ -150,6 +150,25 @@ TEST_CASE("overrides map any channels to a buffer, and 'only' limits loading") {
   CHECK_THROWS_AS(parseChannelOverride("nothing=R,G,B"), std::invalid_argument);
 }
 
+TEST_CASE("buffers left out of a read are read later, as a full read gives them") {
+  TempDir dir;
+  writeBlenderLike(dir / "frame.exr", 4, 3);
+  const FrameBuffers all = readFrame(dir / "frame.exr");
+  ReadOptions options;
+  options.only = {"color"};
+  const FrameBuffers first = readFrame(dir / "frame.exr", options);
+  CHECK(first.names() == std::vector<std::string>{"color"});
+  std::vector<std::string> rest = all.names();
+  rest.erase(std::find(rest.begin(), rest.end(), "color"));
+  CHECK(first.unread == rest);
+  const FrameBuffers more = withUnread(first, {"albedo", "normal", "no_such_buffer"});
+  CHECK(more.get("albedo").pixels == all.get("albedo").pixels);
+  CHECK(more.get("normal").pixels == all.get("normal").pixels);
+  CHECK(more.get("color").pixels == all.get("color").pixels);
+  CHECK(std::find(more.unread.begin(), more.unread.end(), "albedo") == more.unread.end());
+  CHECK(all.unread.empty());
+}
+
 TEST_CASE("available buffers: what readFrame would load, from the header") {
   TempDir dir;
   writeBlenderLike(dir / "frame.exr", 4, 3);
