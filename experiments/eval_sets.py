@@ -161,8 +161,10 @@ def table_lines(results, names):
         a, b = names[-1], names[-2]
         worst = min(keys, key=lambda k: results[a][k]["psnr"] - results[b][k]["psnr"])
         d = results[a][worst]["psnr"] - results[b][worst]["psnr"]
-        lines += ["", f"Largest PSNR loss of {a} against {b} on one frame: {d:+.2f} dB "
-                      f"({worst[0]}/{worst[1]}, {worst[2]} spp)."]
+        where = f"({worst[0]}/{worst[1]}, {worst[2]} spp)"
+        lines += ["", f"{a} against {b}, frame by frame: "
+                      + (f"worst {d:+.2f} dB PSNR {where}." if d < 0 else
+                         f"never worse; the smallest gain {d:+.2f} dB PSNR {where}.")]
     return lines
 
 

@@ -11,8 +11,8 @@
    (scenegen/make_dataset.py, into --test-split's parent).
 2. Scores every method on every set with eval_sets.py (results in WORK/<name>, kept
    between runs with --reuse).
-3. Times the default's quality levels against OIDN's two modes (bench/speed_vs_oidn.py),
-   unless --no-speed.
+3. Times the default's quality levels against OIDN's two modes (bench/speed_vs_oidn.py);
+   with --no-speed the page keeps the table the last timed run stored in WORK.
 4. Writes the page: the default against OIDN's usual call and OIDN's prefilter mode first,
    then the quality levels and speed, then the ablations, each with its model file.
    Sections other scripts keep in the page (<!-- NAME: begin --> ... <!-- NAME: end -->)
@@ -96,15 +96,24 @@ def score(args, methods):
 
 
 def speed_lines(args):
+    """The speed benchmark's table: measured now, or with --no-speed the one the last
+    run stored in WORK (which says when it was measured)."""
+    stored = os.path.join(args.work, "speed.md")
     if args.no_speed:
-        return ["Not measured in this run (`--no-speed`); [dndenoise.md](dndenoise.md#speed-and-memory) "
+        if os.path.exists(stored):
+            return open(stored).read().rstrip().splitlines()
+        return ["Not measured (`--no-speed`); [dndenoise.md](dndenoise.md#speed-and-memory) "
                 "has the latest figures and their commands."]
     cmd = [sys.executable, os.path.join(ROOT, "bench", "speed_vs_oidn.py"), "--bin", args.bin]
     print("results:", shlex.join(cmd), flush=True)
     out = subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True, text=True).stdout
-    return [f"`python3 bench/speed_vs_oidn.py --bin {os.path.relpath(args.bin, ROOT)}` (whole process "
-            "per frame at 1920x1080, medians of 3 interleaved rounds):", "", "```text",
-            *out.rstrip().splitlines(), "```"]
+    lines = [f"`python3 bench/speed_vs_oidn.py --bin {os.path.relpath(args.bin, ROOT)}` on "
+             f"{datetime.date.today()} (whole process per frame at 1920x1080, medians of 3 "
+             "interleaved rounds):", "", "```text", *out.rstrip().splitlines(), "```"]
+    os.makedirs(args.work, exist_ok=True)
+    with open(stored, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    return lines
 
 
 def method_list(methods):
@@ -195,7 +204,8 @@ def main():
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--results", default=os.path.join(ROOT, "docs", "RESULTS.md"))
     p.add_argument("--no-render", action="store_true", help="score only the renders that exist")
-    p.add_argument("--no-speed", action="store_true", help="leave the speed benchmark out")
+    p.add_argument("--no-speed", action="store_true",
+                   help="do not time: the page keeps the table the last timed run stored in WORK")
     p.add_argument("--reuse", action="store_true", help="keep results already scored in WORK")
     p.add_argument("--page-only", action="store_true", help="write the page from stored results")
     args = p.parse_args()
