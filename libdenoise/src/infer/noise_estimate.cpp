@@ -8,6 +8,11 @@
 
 namespace dn {
 
+const std::vector<std::string>& noiseFeatureBuffers() {
+  static const std::vector<std::string> names = {"albedo", "normal", "depth"};
+  return names;
+}
+
 namespace {
 
 constexpr int64_t kStripRows = 256;
@@ -41,15 +46,6 @@ torch::Tensor flatPixels(const FrameBuffers& frame, const std::vector<std::strin
   const auto edge = std::get<0>(highPass(guide).abs().max(1, true));
   return (edge < kFeatureEdge).to(torch::kFloat32);
 }
-
-}  // namespace
-
-const std::vector<std::string>& noiseFeatureBuffers() {
-  static const std::vector<std::string> names = {"albedo", "normal", "depth"};
-  return names;
-}
-
-namespace {
 
 // Immerkaer's residual at x of three consecutive rows, as highPass gives it.
 inline float residual(const float* up, const float* mid, const float* down, int64_t x) {

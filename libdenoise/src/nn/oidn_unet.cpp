@@ -268,10 +268,7 @@ bool OidnBaseImpl::canPrefilter() const {
 }
 
 OidnUNet OidnBaseImpl::net(const std::string& inputSet) const {
-  return handedOut(nets_.at(inputSet));
-}
-
-OidnUNet OidnBaseImpl::handedOut(OidnUNet net) const {
+  OidnUNet net = nets_.at(inputSet);
   if (channelsLast_) net->useChannelsLast();
   return net;
 }

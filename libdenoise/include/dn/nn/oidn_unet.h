@@ -138,8 +138,6 @@ class OidnBaseImpl : public torch::nn::Module {
   void useBFloat16(bool on);
 
  private:
-  OidnUNet handedOut(OidnUNet net) const;
-
   std::vector<std::string> sets_;
   std::map<std::string, OidnUNet> nets_;
   bool channelsLast_ = false;
