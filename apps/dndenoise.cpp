@@ -51,7 +51,8 @@ their prefilter mode (albedo and normal denoised first, then the colour), at
 about the time OIDN takes in that mode. Where the networks leave correlated
 noise (a pixel filter that splats samples), the Control Module, fed the
 buffers OIDN ignores, steers them with diffusion refinement. -q high adds the
-light-path split, and --temporal on uses an animation's neighbouring frames.
+light-path split. On a frame sequence with motion vectors, each frame's
+result is averaged with its neighbours' where they agree (--temporal).
 Multilayer EXRs from Blender/Cycles and other renderers' usual channel names
 are read as they are; the result is added as a layer beside every input layer
 and the input's metadata (or written alone with --rgb-only).
@@ -102,11 +103,9 @@ output:
   --skip-missing      denoise the frames that exist, after naming the missing ones
   --temporal on|off   sequences with motion vectors (Blender's Vector pass, motion
                       blur off; Arnold/Karma motionvector, V-Ray VRayVelocity,
-                      RenderMan motionBack/Fore): on (or filter) averages each
+                      RenderMan motionBack/Fore): on (the default) averages each
                       frame's result with its neighbours' where the motion, the
-                      features and the light agree; off (default for now): every
-                      frame alone; accumulate: average the noisy inputs that way
-                      before denoising (measured worse: moving shadows averaged in)
+                      features and the light agree; off: every frame alone
   --window N          neighbours on each side for --temporal, 1-8 (default 4)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
@@ -333,14 +332,8 @@ Options parseArgs(int argc, char** argv) {
       o.skipMissing = true;
     } else if (args.flag("--temporal")) {
       const std::string v = args.value("--temporal");
-      const std::map<std::string, cli::TemporalMode> modes = {
-          {"on", cli::TemporalMode::Filter},
-          {"filter", cli::TemporalMode::Filter},
-          {"accumulate", cli::TemporalMode::Accumulate}};
-      if (v != "off" && !modes.count(v))
-        throw cli::UsageError("--temporal must be on, off, filter or accumulate, got " + v);
-      o.temporal.enabled = v != "off";
-      if (o.temporal.enabled) o.temporal.mode = modes.at(v);
+      if (v != "on" && v != "off") throw cli::UsageError("--temporal must be on or off, got " + v);
+      o.temporal.enabled = v == "on";
     } else if (args.flag("--window")) {
       o.temporal.radius = args.intValue("--window", 1, 8);
     } else if (args.flag("--motion")) {
@@ -683,6 +676,7 @@ int run(Options o, int argc, char** argv) {
   if (o.passes) requirePrefilterNetworks(passBase, o.model);
 
   o.temporal.read = o.read;
+  o.temporal.filter.threads = torch::get_num_threads();
   std::vector<std::string> jobInputs;
   for (const auto& job : jobs) jobInputs.push_back(job.first);
   std::string frameByFrame;

@@ -4,11 +4,12 @@
 // code path as dndenoise (apps/common/temporal_sequence.cpp), with the
 // "denoiser" reading the frame's stored result.
 //   temporal_refilter NOISY.#.exr ALONE.#.exr -o OUT.#.exr [--window N]
-//                     [--colour LOW,HIGH] [--frames RANGE]
+//                     [--colour LOW,HIGH] [--light-spread S] [--frames RANGE]
 #include <fmt/format.h>
 
 #include <cstdio>
 #include <string>
+#include <thread>
 
 #include "common/cli.h"
 #include "common/sequence.h"
@@ -23,6 +24,7 @@ int main(int argc, char** argv) {
     std::string output, frames;
     cli::TemporalSettings settings;
     settings.enabled = true;
+    settings.filter.threads = static_cast<int>(std::thread::hardware_concurrency());
     while (!args.done()) {
       if (args.flag("-o")) {
         output = args.value("-o");
@@ -33,6 +35,8 @@ int main(int argc, char** argv) {
         if (values.size() != 2) throw cli::UsageError("--colour LOW,HIGH");
         settings.filter.colourLow = cli::Args::toDouble("--colour", values[0]);
         settings.filter.colourHigh = cli::Args::toDouble("--colour", values[1]);
+      } else if (args.flag("--light-spread")) {
+        settings.filter.changedLightSpread = args.doubleValue("--light-spread", 0.0, 1e9);
       } else if (args.flag("--frames")) {
         frames = args.value("--frames");
       } else {

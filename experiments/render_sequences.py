@@ -10,6 +10,9 @@ Scenes (all small, deterministic, built here):
   still      the same room, a locked-off camera (one reference for every frame)
   object     locked-off camera, a box sweeping in front of the room (disocclusions)
   light      locked-off camera, the key light moving across the room
+  orbit      the camera circling the room while a ball rolls across the floor (camera and
+             object motion together; added after the filter's thresholds were set, as a
+             held-out design)
   convention a camera looking straight down at a textured plane, moving a known number of
              pixels per frame: (+3, +2) px from frame 1 to 2 and (+6, +4) px from 2 to 3
              (x right, y up, in the camera's view), to establish the Vector pass's
@@ -41,7 +44,7 @@ def script_argv():
 
 def parse_args():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scene", choices=("pan", "still", "object", "light", "convention"), required=True)
+    p.add_argument("--scene", choices=("pan", "still", "object", "light", "orbit", "convention"), required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--res", default="160x120", help="WIDTHxHEIGHT")
     p.add_argument("--frames", default="1-8", help="FIRST-LAST")
@@ -189,6 +192,14 @@ def build_room(scene, args):
         drive(box, "location", 0, "3.0 - 0.28 * frame")
     elif args.scene == "light":  # the key light slides along the ceiling
         drive(key_obj, "location", 0, "3.5 - 0.6 * frame")
+    elif args.scene == "orbit":  # about 1.5 degrees a frame around the room's centre, a ball rolling
+        drive(cam, "location", 0, "0.5 + 7.0 * sin(0.026 * frame)")
+        drive(cam, "location", 1, "0.5 - 7.0 * cos(0.026 * frame)")
+        drive(cam, "rotation_euler", 2, "0.026 * frame")
+        ball = add_mesh("sphere", "roller", (0, -1.0, 0.5), (0.5, 0.5, 0.5),
+                        material("roller", (0.8, 0.35, 0.1), 0.3, checker=4))
+        drive(ball, "location", 0, "-2.5 + 0.3 * frame")
+        drive(ball, "rotation_euler", 1, "0.6 * frame")
 
 
 def build_convention(scene, args):

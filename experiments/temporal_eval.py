@@ -5,7 +5,7 @@
       --dndenoise build/bin/dndenoise --dnmetrics build/bin/dnmetrics \
       --refilter build/bin/temporal_refilter --model models/default.dnm \
       --scenes still object pan light --spp 4 16 [--window 4] [--threads 2] \
-      [--extra accumulate on]
+      [--extra on]
 
 For each scene folder (experiments/render_sequences.py: spp<N>.<frame>.exr, and
 ref.<frame>.exr or one ref.exr for a locked-off shot; at most 8 frames) and
@@ -66,6 +66,8 @@ def denoise(args, scene, spp, method, out):
                "--frames", f"1-{last}"]
         if args.colour:
             cmd += ["--colour", args.colour]
+        if args.light_spread:
+            cmd += ["--light-spread", args.light_spread]
         return run(cmd, log=os.path.join(out, method + ".log"))[0]
     if done and not args.force and len(done) == len(frames):
         return None
@@ -108,7 +110,8 @@ def main():
     ap.add_argument("--refilter", required=True, help="bench/temporal_refilter")
     ap.add_argument("--model", required=True)
     ap.add_argument("--colour", default="", help="LOW,HIGH: the colour test's thresholds")
-    ap.add_argument("--extra", nargs="*", default=[], choices=["on", "accumulate"])
+    ap.add_argument("--light-spread", default="", help="the spread above which a neighbour is left out")
+    ap.add_argument("--extra", nargs="*", default=[], choices=["on"])
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
     ap.add_argument("--window", type=int, default=4)

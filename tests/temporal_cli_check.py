@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """dndenoise on a sequence with motion vectors (testdata/sequence, made by
-experiments/render_sequences.py --scene object): with --temporal on the
-neighbours are used (off by default for now), -v says per frame how much came from history, a frame's result does
+experiments/render_sequences.py --scene object): the neighbours are
+used by default (--temporal on), -v says per frame how much came from history, a frame's result does
 not depend on how the shot was split into runs (bit-identical pixels), and a
 sequence without motion vectors is denoised frame by frame with one line
 saying so. Also dnmetrics on the sequences (per-frame rows, flicker).
@@ -64,23 +64,26 @@ def main():
                               read_rgb(os.path.join(work, f"split.{n:04d}.exr"))) for n in FRAMES)
     check(same, "frames 1-3 and 4-6 in two runs are bit-identical to 1-6 in one run")
 
-    # Off by default for now (docs/RESULTS.md): the same bits as --temporal off.
-    run([args.dndenoise, shot, "--rgb-only", "-o", os.path.join(work, "alone.#.exr")] + fast)
-    run(base + ["-o", os.path.join(work, "off.#.exr"), "--temporal", "off"])
-    differ = [not np.array_equal(read_rgb(os.path.join(work, f"whole.{n:04d}.exr")),
-                                 read_rgb(os.path.join(work, f"alone.{n:04d}.exr"))) for n in FRAMES]
-    check(all(differ), "--temporal on gives other results than each frame alone")
-    check(all(np.array_equal(read_rgb(os.path.join(work, f"off.{n:04d}.exr")),
-                             read_rgb(os.path.join(work, f"alone.{n:04d}.exr"))) for n in FRAMES),
-          "the default is frame by frame (= --temporal off)")
+    # On by default wherever the frames carry motion: the same bits as --temporal on.
+    plain = [args.dndenoise, shot, "--rgb-only"] + fast
+    run(plain + ["-o", os.path.join(work, "default.#.exr")])
+    run(plain + ["-o", os.path.join(work, "on.#.exr"), "--temporal", "on"])
+    run(plain + ["-o", os.path.join(work, "alone.#.exr"), "--temporal", "off"])
+    frames = {name: [read_rgb(os.path.join(work, f"{name}.{n:04d}.exr")) for n in FRAMES]
+              for name in ("whole", "default", "on", "alone")}
+    check(all(np.array_equal(a, b) for a, b in zip(frames["default"], frames["on"])),
+          "the default uses the neighbours (= --temporal on)")
+    check(all(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["alone"])) and
+          all(not np.array_equal(a, b) for a, b in zip(frames["whole"], frames["alone"])),
+          "the default and --window 2 give other results than --temporal off (each frame alone)")
 
     # No motion vectors: one line, frame by frame, the same pixels as --temporal off.
     still = os.path.join(args.testdata, "renderers", "blender5_hdri_4spp.exr")
     for n in (1, 2):
         shutil.copy(still, os.path.join(work, f"novec.{n:04d}.exr"))
-    plain = run([args.dndenoise, os.path.join(work, "novec.#.exr"), "-o",
-                 os.path.join(work, "novec_out.#.exr"), "--rgb-only", "--temporal", "on"] + fast)
-    notes = [l for l in plain.stderr.splitlines() if "frame by frame" in l]
+    novec = run([args.dndenoise, os.path.join(work, "novec.#.exr"), "-o",
+                 os.path.join(work, "novec_out.#.exr"), "--rgb-only"] + fast)
+    notes = [l for l in novec.stderr.splitlines() if "frame by frame" in l]
     check(len(notes) == 1 and "no motion vectors" in notes[0], "no motion vectors: one line, frame by frame")
 
     for bad in (["--window", "0"], ["--temporal", "maybe"], ["--window", "9"]):

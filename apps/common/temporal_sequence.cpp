@@ -33,25 +33,33 @@ std::optional<int> frameNumberOf(const std::string& pattern, const std::string& 
   return static_cast<int>(n);
 }
 
-// A frame as read: the buffers the model reads, and its guides and motion.
+// A frame as read: its guides and motion, its noisy colour and, once denoised
+// alone, its result. The buffers the model reads are dropped once denoised, so
+// a window of 1080p frames holds about 0.13 GB a frame, not the whole file.
 struct TemporalSequence::Input {
-  FrameBuffers buffers;
-  temporal::WindowFrame frame;  // noisy, guides, motion (denoised filled per use)
+  FrameBuffers buffers;         // what the model reads, until denoised
+  temporal::WindowFrame frame;  // noisy, guides, motion; denoised
 };
 
 namespace {
 
 // The albedo, normal and depth of a frame file: the guides of reprojection.
-motion::Guides readGuides(const std::string& path, const ReadOptions& base) {
+// Taken from the buffers already read where the model reads them (one
+// decoding of the file less), else read.
+motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
+                        const ReadOptions& base) {
   ReadOptions read = base;
   read.only = {"color"};
   for (const auto& b : availableBuffers(path, base))
-    if (b == "albedo" || b == "normal" || b == "depth") read.only.push_back(b);
-  FrameBuffers frame = readFrame(path, read);
+    if ((b == "albedo" || b == "normal" || b == "depth") && !frame.has(b)) read.only.push_back(b);
+  const FrameBuffers extra = read.only.size() > 1 ? readFrame(path, read) : FrameBuffers();
+  auto guide = [&](const std::string& name) {
+    return frame.has(name) ? frame.get(name) : extra.has(name) ? extra.get(name) : Image();
+  };
   motion::Guides g;
-  if (frame.has("albedo")) g.albedo = frame.get("albedo");
-  if (frame.has("normal")) g.normal = frame.get("normal");
-  if (frame.has("depth")) g.depth = frame.get("depth");
+  g.albedo = guide("albedo");
+  g.normal = guide("normal");
+  g.depth = guide("depth");
   return g;
 }
 
@@ -93,17 +101,18 @@ std::string TemporalSequence::fileOf(int number) const {
   return fs::exists(path, ec) ? path : std::string();
 }
 
-std::shared_ptr<const TemporalSequence::Input> TemporalSequence::input(int number,
-                                                                       const FrameBuffers* given,
-                                                                       const Read& read) {
+std::shared_ptr<TemporalSequence::Input> TemporalSequence::input(int number,
+                                                                 const FrameBuffers* given,
+                                                                 const Read& read) {
   if (auto it = inputs_.find(number); it != inputs_.end()) return it->second;
   const std::string path = fileOf(number);
   if (path.empty()) return nullptr;
   auto entry = std::make_shared<Input>();
-  entry->buffers = given ? *given : read(path);
-  const FrameBuffers& frame = entry->buffers;
+  // A given frame is denoised straight from the caller's buffers.
+  if (!given) entry->buffers = read(path);
+  const FrameBuffers& frame = given ? *given : entry->buffers;
   entry->frame.noisy = frame.get("color");
-  entry->frame.guides = readGuides(path, settings_.read);
+  entry->frame.guides = guidesOf(frame, path, settings_.read);
   std::optional<motion::MotionField> field =
       settings_.motion.empty()
           ? motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer)
@@ -121,28 +130,11 @@ std::shared_ptr<const DenoiseResult> TemporalSequence::estimate(int number,
   if (auto it = estimates_.find(number); it != estimates_.end()) return it->second;
   auto self = input(number, given, read);
   if (!self) return nullptr;
-  if (settings_.mode == TemporalMode::Filter)
-    return estimates_[number] =
-               std::make_shared<DenoiseResult>(denoise(fileOf(number), self->buffers));
-  const int radius = settings_.radius;
-  std::vector<std::shared_ptr<const Input>> held;
-  std::vector<const FrameBuffers*> buffers;
-  std::vector<const temporal::WindowFrame*> window;
-  for (int m = number - radius; m <= number + radius; ++m) {
-    auto entry = m == number ? self : input(m, nullptr, read);
-    const bool usable = entry && entry->buffers.width == self->buffers.width &&
-                        entry->buffers.height == self->buffers.height;
-    held.push_back(entry);
-    buffers.push_back(usable ? &entry->buffers : nullptr);
-    window.push_back(usable ? &entry->frame : nullptr);
-  }
-  temporal::TemporalOptions options = settings_.filter;
-  options.radius = radius;
-  temporal::TemporalStats stats;
-  const FrameBuffers accumulated =
-      temporal::accumulateInputs(buffers, window, radius, options, stats);
-  lastStats_ = stats;
-  return estimates_[number] = std::make_shared<DenoiseResult>(denoise(fileOf(number), accumulated));
+  auto result =
+      std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
+  self->buffers = FrameBuffers();
+  self->frame.denoised = std::move(result->color);  // the filter's input, held once
+  return estimates_[number] = result;
 }
 
 void TemporalSequence::forget(int number) {
@@ -163,21 +155,16 @@ DenoiseResult TemporalSequence::denoise(const std::string& input, const FrameBuf
   const int radius = settings_.radius;
   forget(n);
   lastNumber_ = n;
-  if (settings_.mode == TemporalMode::Accumulate) return *estimate(n, &frame, read, denoise);
   std::vector<std::shared_ptr<const DenoiseResult>> held;
-  std::vector<temporal::WindowFrame> frames(2 * radius + 1);
+  std::vector<std::shared_ptr<const Input>> sources;
   std::vector<const temporal::WindowFrame*> window;
   for (int m = n - radius; m <= n + radius; ++m) {
     auto result = estimate(m, m == n ? &frame : nullptr, read, denoise);
     auto source = result ? this->input(m, nullptr, read) : nullptr;
-    const bool usable = result && result->color.sameShape(frame.get("color"));
+    const bool usable = source && source->frame.denoised.sameShape(frame.get("color"));
     held.push_back(result);
-    if (usable) {
-      temporal::WindowFrame& f = frames[m - (n - radius)];
-      f = source->frame;
-      f.denoised = result->color;
-    }
-    window.push_back(usable ? &frames[m - (n - radius)] : nullptr);
+    sources.push_back(source);
+    window.push_back(usable ? &source->frame : nullptr);
   }
   temporal::TemporalOptions options = settings_.filter;
   options.radius = radius;
@@ -194,6 +181,9 @@ std::string TemporalSequence::report() const {
                                  lastStats_.neighbours == 1 ? "" : "s");
   if (lastStats_.repeatedNoise > 0)
     line += fmt::format(", {} repeating its noise and left out", lastStats_.repeatedNoise);
+  if (lastStats_.changedLight > 0)
+    line += fmt::format(", {} with the light changed over the frame and left out",
+                        lastStats_.changedLight);
   return line + ")";
 }
 

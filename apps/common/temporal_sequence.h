@@ -18,16 +18,9 @@
 
 namespace dn::cli {
 
-// How history and frame are combined (--temporal): filter the frames denoised
-// alone (the default), or accumulate the noisy inputs before denoising (which
-// averages moving shadows in: measured worse, docs/RESULTS.md).
-enum class TemporalMode { Filter, Accumulate };
-
 struct TemporalSettings {
-  // --temporal on|off. Off by default: on the moving-light shot it is not yet
-  // better than every frame alone (docs/RESULTS.md, "Sequences").
-  bool enabled = false;
-  TemporalMode mode = TemporalMode::Filter;
+  // --temporal on|off: on wherever the frames carry motion vectors.
+  bool enabled = true;
   int radius = 4;                    // --window N: neighbours on each side
   std::string motion;                // --motion FILE or PATTERN: separate motion files
   ReadOptions read;                  // the view layer and channel overrides
@@ -40,7 +33,7 @@ std::optional<int> frameNumberOf(const std::string& pattern, const std::string& 
 class TemporalSequence {
  public:
   using Read = std::function<FrameBuffers(const std::string& path)>;
-  // Denoises `frame`, which is the frame of file `path` (or its accumulated input).
+  // Denoises `frame`, which is the frame of file `path`.
   using Denoise = std::function<DenoiseResult(const std::string& path, const FrameBuffers& frame)>;
 
   // The temporal plan for `inputs` (the tool's input arguments) whose frames
@@ -63,8 +56,8 @@ class TemporalSequence {
   struct Input;
   TemporalSequence(std::string pattern, std::map<std::string, int> numbers,
                    TemporalSettings settings);
-  std::shared_ptr<const Input> input(int number, const FrameBuffers* given, const Read& read);
-  // A frame's own estimate: denoised alone, or its accumulated input denoised.
+  std::shared_ptr<Input> input(int number, const FrameBuffers* given, const Read& read);
+  // A frame's own estimate: denoised alone.
   std::shared_ptr<const DenoiseResult> estimate(int number, const FrameBuffers* given,
                                                 const Read& read, const Denoise& denoise);
   std::string fileOf(int number) const;
@@ -73,7 +66,7 @@ class TemporalSequence {
   std::string pattern_;
   std::map<std::string, int> numbers_;  // input file -> frame number
   TemporalSettings settings_;
-  std::map<int, std::shared_ptr<const Input>> inputs_;
+  std::map<int, std::shared_ptr<Input>> inputs_;
   std::map<int, std::shared_ptr<const DenoiseResult>> estimates_;
   temporal::TemporalStats lastStats_;
   int lastNumber_ = 0;

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
-#include <map>
+#include <functional>
 #include <stdexcept>
+#include <thread>
 
 namespace dn::temporal {
 
@@ -148,144 +150,161 @@ motion::FrameGeometry geometryOf(const WindowFrame& frame) {
 
 }  // namespace
 
+namespace {
+
+// What the centre frame holds for the tests, computed once per frame.
+struct Centre {
+  const WindowFrame* frame;
+  double scale;             // the exposure that brings its mean to 0.18
+  Image mapped;             // its result, tonemapped
+  Image noisyMapped;        // its render, tonemapped
+  Image residual;           // noisyMapped - mapped: its noise, as the denoiser saw it
+  std::vector<float> noise; // the local level of that noise
+};
+
+Centre centreOf(const WindowFrame& frame) {
+  Centre c{&frame, exposureScale(frame.denoised), {}, {}, {}, {}};
+  c.mapped = tonemapped(frame.denoised, c.scale);
+  c.noisyMapped = tonemapped(frame.noisy, c.scale);
+  c.residual = difference(c.noisyMapped, c.mapped);
+  c.noise = localNoise(c.residual, 3);
+  // A floor: flat, noise-free regions (a clear sky) must not divide by zero.
+  std::vector<float> sorted = c.noise;
+  auto middle = sorted.begin() + sorted.size() / 2;
+  std::nth_element(sorted.begin(), middle, sorted.end());
+  const float floor = std::max(0.1f * *middle, 1e-4f);
+  for (float& v : c.noise) v = std::max(v, floor);
+  return c;
+}
+
+// One neighbour's result brought into the centre frame, with a weight per
+// pixel; or why it was left out whole.
+struct Contribution {
+  enum class Verdict { Used, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
+  Image image;
+  std::vector<double> weight;
+};
+
+// `chain`: the centre's geometry, then each frame's up to the neighbour.
+Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
+                            const std::vector<motion::FrameGeometry>& chain, bool forward,
+                            const TemporalOptions& options) {
+  const WindowFrame& current = *centre.frame;
+  const Image positions = motion::chainPositions(chain, forward, options.trust);
+  motion::Reprojected moved = motion::reproject(neighbour.denoised, neighbour.guides, positions,
+                                                current.guides, options.trust);
+  const Image neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
+  const Image residual = motion::reprojectNearest(
+      difference(neighbourNoisy, tonemapped(neighbour.denoised, centre.scale)), positions);
+  Contribution out;
+  if (correlation(centre.residual, residual, moved.trust) > options.repeatedNoiseCorrelation) {
+    out.verdict = Contribution::Verdict::RepeatedNoise;
+    return out;
+  }
+  std::vector<float> d = absoluteDifference(tonemapped(moved.image, centre.scale), centre.mapped);
+  for (std::size_t i = 0; i < d.size(); ++i) d[i] /= centre.noise[i];
+  // Where the light changed over most of the frame (a moving lamp), the
+  // differences' own spread is large too. Then shading changes too faint for
+  // the tests below to find per pixel are everywhere: the neighbour is left
+  // out whole. Below that, the cap keeps moving shadows rejected.
+  const double fullSpread = robustSpread(d, moved.trust);
+  if (fullSpread > options.changedLightSpread) {
+    out.verdict = Contribution::Verdict::ChangedLight;
+    return out;
+  }
+  const double spread = std::min(fullSpread, options.maxSpread);
+  const std::vector<float> changed =
+      lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions),
+                  moved.trust, centre.residual, residual, options.lightBox);
+  out.weight.assign(d.size(), 0.0);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    double w = moved.trust.pixels[i];
+    if (w <= 0.0) continue;
+    if (spread > 0.0) {
+      const double z = d[i] / spread;
+      w *= std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0,
+                      1.0);
+    }
+    w *= std::clamp((options.lightHigh - changed[i]) / (options.lightHigh - options.lightLow), 0.0,
+                    1.0);
+    out.weight[i] = w;
+  }
+  out.image = std::move(moved.image);
+  return out;
+}
+
+// Runs task(0 .. count-1) on up to `threads` threads.
+void forEach(std::size_t count, int threads, const std::function<void(std::size_t)>& task) {
+  std::atomic<std::size_t> next{0};
+  auto worker = [&] {
+    for (std::size_t i = next++; i < count; i = next++) task(i);
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+}
+
+}  // namespace
+
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
                            const TemporalOptions& options) {
   if (centre >= window.size() || !window[centre])
     throw std::invalid_argument("filterFrame: the centre frame is missing");
   const WindowFrame& current = *window[centre];
-  const Image& base = current.denoised;
-  const double scale = exposureScale(base);
-  const Image baseMapped = tonemapped(base, scale);
-  const Image baseResidual = difference(tonemapped(current.noisy, scale), baseMapped);
-  std::vector<float> noiseLevel = localNoise(baseResidual, 3);
-  {  // a floor: flat, noise-free regions (a clear sky) must not divide by zero
-    std::vector<float> sorted = noiseLevel;
-    auto middle = sorted.begin() + sorted.size() / 2;
-    std::nth_element(sorted.begin(), middle, sorted.end());
-    const float floor = std::max(0.1f * *middle, 1e-4f);
-    for (float& v : noiseLevel) v = std::max(v, floor);
-  }
-
-  std::vector<double> sum(base.pixels.begin(), base.pixels.end());
-  std::vector<double> weight(base.pixelCount(), 1.0);
-  TemporalResult result;
+  // The neighbours in order (the past nearest first, then the future), each
+  // with the chain of frames its motion is followed along; a gap ends a side.
+  struct Neighbour {
+    const WindowFrame* frame;
+    std::vector<motion::FrameGeometry> chain;
+    bool forward;
+  };
+  std::vector<Neighbour> neighbours;
   for (int side : {-1, 1}) {
     std::vector<motion::FrameGeometry> chain = {geometryOf(current)};
     for (int k = 1; k <= options.radius; ++k) {
       const long index = static_cast<long>(centre) + side * k;
       if (index < 0 || index >= static_cast<long>(window.size()) || !window[index]) break;
-      const WindowFrame& neighbour = *window[index];
-      if (neighbour.motion.empty() || current.motion.empty()) break;
-      chain.push_back(geometryOf(neighbour));
-      ++result.stats.neighbours;
-      const Image positions = motion::chainPositions(chain, side > 0, options.trust);
-      const motion::Reprojected moved = motion::reproject(neighbour.denoised, neighbour.guides,
-                                                          positions, current.guides, options.trust);
-      const Image residual = motion::reprojectNearest(
-          difference(tonemapped(neighbour.noisy, scale), tonemapped(neighbour.denoised, scale)),
-          positions);
-      const std::vector<float> changed =
-          lightChange(tonemapped(current.noisy, scale),
-                      motion::reprojectNearest(tonemapped(neighbour.noisy, scale), positions),
-                      moved.trust, baseResidual, residual, options.lightBox);
-      if (correlation(baseResidual, residual, moved.trust) > options.repeatedNoiseCorrelation) {
-        ++result.stats.repeatedNoise;
-        result.stats.trusted.push_back(0.0);
-        continue;
-      }
-      std::vector<float> d = absoluteDifference(tonemapped(moved.image, scale), baseMapped);
-      for (std::size_t i = 0; i < d.size(); ++i) d[i] /= noiseLevel[i];
-      // Where the light changed over the whole frame (a moving lamp), the
-      // differences' own spread is large too: the cap keeps them rejected.
-      const double spread = std::min(robustSpread(d, moved.trust), options.maxSpread);
-      std::size_t used = 0;
-      for (std::size_t i = 0; i < d.size(); ++i) {
-        double w = moved.trust.pixels[i];
-        if (w <= 0.0) continue;
-        if (spread > 0.0) {
-          const double z = d[i] / spread;
-          w *= std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0,
-                          1.0);
-        }
-        w *= std::clamp((options.lightHigh - changed[i]) / (options.lightHigh - options.lightLow),
-                        0.0, 1.0);
-        if (w <= 0.0) continue;
-        ++used;
-        weight[i] += w;
-        for (int c = 0; c < 3; ++c) sum[3 * i + c] += w * moved.image.pixels[3 * i + c];
-      }
-      result.stats.trusted.push_back(double(used) / d.size());
+      if (window[index]->motion.empty() || current.motion.empty()) break;
+      chain.push_back(geometryOf(*window[index]));
+      neighbours.push_back({window[index], chain, side > 0});
     }
+  }
+  const Centre c = centreOf(current);
+  std::vector<Contribution> contributions(neighbours.size());
+  forEach(neighbours.size(), options.threads, [&](std::size_t n) {
+    const Neighbour& nb = neighbours[n];
+    contributions[n] = contributionOf(c, *nb.frame, nb.chain, nb.forward, options);
+  });
+
+  // Summed in the neighbours' order, so the result does not depend on threads.
+  const Image& base = current.denoised;
+  std::vector<double> sum(base.pixels.begin(), base.pixels.end());
+  std::vector<double> weight(base.pixelCount(), 1.0);
+  TemporalResult result;
+  result.stats.neighbours = static_cast<int>(neighbours.size());
+  for (const Contribution& contribution : contributions) {
+    result.stats.repeatedNoise += contribution.verdict == Contribution::Verdict::RepeatedNoise;
+    result.stats.changedLight += contribution.verdict == Contribution::Verdict::ChangedLight;
+    std::size_t used = 0;
+    for (std::size_t i = 0; i < contribution.weight.size(); ++i) {
+      const double w = contribution.weight[i];
+      if (w <= 0.0) continue;
+      ++used;
+      weight[i] += w;
+      for (int ch = 0; ch < 3; ++ch) sum[3 * i + ch] += w * contribution.image.pixels[3 * i + ch];
+    }
+    result.stats.trusted.push_back(double(used) / weight.size());
   }
   result.color = Image(base.width, base.height, 3);
   double share = 0.0;
   for (std::size_t i = 0; i < weight.size(); ++i) {
-    for (int c = 0; c < 3; ++c)
-      result.color.pixels[3 * i + c] = static_cast<float>(sum[3 * i + c] / weight[i]);
+    for (int ch = 0; ch < 3; ++ch)
+      result.color.pixels[3 * i + ch] = static_cast<float>(sum[3 * i + ch] / weight[i]);
     share += 1.0 - 1.0 / weight[i];
   }
   result.stats.historyShare = share / std::max<std::size_t>(1, weight.size());
   return result;
-}
-
-FrameBuffers accumulateInputs(const std::vector<const FrameBuffers*>& inputs,
-                              const std::vector<const WindowFrame*>& window, std::size_t centre,
-                              const TemporalOptions& options, TemporalStats& stats) {
-  if (centre >= window.size() || !window[centre] || !inputs[centre])
-    throw std::invalid_argument("accumulateInputs: the centre frame is missing");
-  const WindowFrame& current = *window[centre];
-  FrameBuffers out = *inputs[centre];
-  std::map<std::string, std::vector<double>> sums;
-  for (const auto& [name, image] : out.buffers)
-    if (name != "depth") sums[name].assign(image.pixels.begin(), image.pixels.end());
-  std::vector<double> weight(out.width * static_cast<std::size_t>(out.height), 1.0);
-  motion::TrustOptions trust = options.trust;
-  trust.nearest = true;
-  stats = TemporalStats{};
-  for (int side : {-1, 1}) {
-    std::vector<motion::FrameGeometry> chain = {geometryOf(current)};
-    for (int k = 1; k <= options.radius; ++k) {
-      const long index = static_cast<long>(centre) + side * k;
-      if (index < 0 || index >= static_cast<long>(window.size()) || !window[index] ||
-          !inputs[index])
-        break;
-      const WindowFrame& neighbour = *window[index];
-      if (neighbour.motion.empty() || current.motion.empty()) break;
-      const bool sameBuffers = std::all_of(sums.begin(), sums.end(), [&](const auto& entry) {
-        return inputs[index]->has(entry.first) &&
-               inputs[index]->get(entry.first).sameShape(out.get(entry.first));
-      });
-      if (!sameBuffers) break;
-      chain.push_back(geometryOf(neighbour));
-      ++stats.neighbours;
-      const Image positions = motion::chainPositions(chain, side > 0, trust);
-      Image trusted;
-      for (auto& [name, sum] : sums) {
-        const motion::Reprojected moved = motion::reproject(
-            inputs[index]->get(name), neighbour.guides, positions, current.guides, trust);
-        const int channels = moved.image.channels;
-        for (std::size_t i = 0; i < weight.size(); ++i)
-          for (int c = 0; c < channels; ++c)
-            sum[i * channels + c] += moved.trust.pixels[i] * moved.image.pixels[i * channels + c];
-        if (trusted.empty()) trusted = moved.trust;
-      }
-      std::size_t used = 0;
-      for (std::size_t i = 0; i < weight.size(); ++i)
-        weight[i] += trusted.pixels[i], used += trusted.pixels[i] > 0.0f;
-      stats.trusted.push_back(double(used) / weight.size());
-    }
-  }
-  double share = 0.0;
-  for (auto& [name, sum] : sums) {
-    Image& image = out.buffers[name];
-    for (std::size_t i = 0; i < weight.size(); ++i)
-      for (int c = 0; c < image.channels; ++c)
-        image.pixels[i * image.channels + c] =
-            static_cast<float>(sum[i * image.channels + c] / weight[i]);
-  }
-  for (double w : weight) share += 1.0 - 1.0 / w;
-  stats.historyShare = share / std::max<std::size_t>(1, weight.size());
-  return out;
 }
 
 }  // namespace dn::temporal

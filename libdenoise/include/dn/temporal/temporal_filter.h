@@ -36,6 +36,10 @@ struct TemporalOptions {
   // experiments/render_sequences.py it is 0.16-0.20 at 4 spp and 0.21-0.26 at
   // 16 spp; a lamp moving across the room raises it to 1-7.
   double maxSpread = 0.3;
+  // A spread above this means the light changed over most of the frame: the
+  // neighbour is rejected whole (on the moving-lamp shot, filtering with the
+  // per-pixel tests alone left frames up to 0.3 dB worse than alone).
+  double changedLightSpread = 0.6;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
   // lightLow standard errors to 0 at lightHigh (a change of light).
@@ -45,6 +49,7 @@ struct TemporalOptions {
   // Noise residuals correlated above this with the frame's: the neighbour
   // repeats the frame's noise (a fixed seed on a still camera) and adds nothing.
   double repeatedNoiseCorrelation = 0.5;
+  int threads = 1;  // neighbours brought in at once; the result does not depend on it
 };
 
 // What one frame took from its neighbours, for -v.
@@ -52,6 +57,7 @@ struct TemporalStats {
   double historyShare = 0.0;    // mean over pixels of the neighbours' share of the weight
   int neighbours = 0;           // neighbours available in the window
   int repeatedNoise = 0;        // of them, rejected for repeating the frame's noise
+  int changedLight = 0;         // of them, rejected for a change of light over the frame
   std::vector<double> trusted;  // per neighbour: share of pixels it contributed to
 };
 
@@ -65,14 +71,5 @@ struct TemporalResult {
 // the frame itself. Deterministic: depends only on the frames given.
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
                            const TemporalOptions& options = {});
-
-// Accumulation before denoising (the other candidate): every buffer of
-// inputs[centre] averaged with the neighbours' (nearest pixel, so the noise
-// stays independent; trusted by the screen, round-trip and guide checks; no
-// colour test, the inputs being noisy). `window` gives each frame's guides and
-// motion (denoised may be empty). stats.historyShare as for filterFrame.
-FrameBuffers accumulateInputs(const std::vector<const FrameBuffers*>& inputs,
-                              const std::vector<const WindowFrame*>& window, std::size_t centre,
-                              const TemporalOptions& options, TemporalStats& stats);
 
 }  // namespace dn::temporal
