@@ -17,7 +17,10 @@ each --spp, denoises the sequence these ways:
   prefilter  OIDN's prefilter mode per frame (oidn_denoise.py --prefilter)
   --extra M  dndenoise --temporal M --float in full (on: to check that it writes
              what temporal_refilter gives, and its time against fbf's)
-and scores each with dnmetrics (PSNR, FLIP per frame, flicker of the error).
+and scores each with dnmetrics (PSNR, FLIP per frame, flicker of the error),
+and with FovVideoVDP as a 24 fps video where --fvvdp-python names an
+interpreter that has pyfvvdp (experiments/fvvdp_score.py --video; JOD, higher
+is better).
 Prints a Markdown table (means over frames; the worst per-frame PSNR change
 against fbf; wall time of the dndenoise runs) and writes OUT/results.json.
 Existing outputs are reused unless --force.
@@ -92,6 +95,23 @@ def score(args, scene, spp, method, out):
             "flicker": [r["flicker"] for r in data["results"][1:]]}
 
 
+def fvvdp(args, scene, spp, method, out):
+    """FovVideoVDP of the method's frames as one 24 fps video, or None without pyfvvdp."""
+    if not args.fvvdp_python:
+        return None
+    folder = os.path.join(args.data, scene)
+    shared = os.path.join(folder, "ref.exr")
+    pairs = []
+    for frame in frames_of(folder, spp):
+        number = frame[-8:-4]
+        pairs += [shared if os.path.exists(shared) else os.path.join(folder, f"ref.{number}.exr"),
+                  os.path.join(out, method, f"spp{spp}.{number}.exr")]
+    target = os.path.join(out, method + ".fvvdp.json")
+    run([args.fvvdp_python, os.path.join(HERE, "fvvdp_score.py"), "--video", "24", "--out", target] + pairs)
+    with open(target) as f:
+        return json.load(f)["results"][0]["fvvdp"]
+
+
 def history_shares(log):
     with open(log) as f:
         return [float(m) for m in re.findall(r"(\d+)% from history", f.read())]
@@ -110,6 +130,7 @@ def main():
     ap.add_argument("--refilter", required=True, help="bench/temporal_refilter")
     ap.add_argument("--model", required=True)
     ap.add_argument("--colour", default="", help="LOW,HIGH: the colour test's thresholds")
+    ap.add_argument("--fvvdp-python", default="", help="an interpreter with pyfvvdp: also FovVideoVDP")
     ap.add_argument("--light-spread", default="", help="the spread above which a neighbour is left out")
     ap.add_argument("--extra", nargs="*", default=[], choices=["on"])
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
@@ -120,8 +141,9 @@ def main():
     args = ap.parse_args()
 
     results = {}
-    print("| scene | spp | method | PSNR dB | FLIP | flicker | note |")
-    print("|---|---|---|---|---|---|---|")
+    video = " FovVideoVDP JOD |" if args.fvvdp_python else ""
+    print("| scene | spp | method | PSNR dB | FLIP | flicker |" + video + " note |")
+    print("|---|---|---|---|---|---|---|" + ("---|" if video else ""))
     for scene in args.scenes:
         for spp in args.spp:
             out = os.path.join(args.out, scene, f"spp{spp}")
@@ -129,6 +151,8 @@ def main():
             methods = list(METHODS) + args.extra
             times = {m: denoise(args, scene, spp, m, out) for m in methods}
             scores = {m: score(args, scene, spp, m, out) for m in methods}
+            for m in methods:
+                scores[m]["fvvdp"] = fvvdp(args, scene, spp, m, out)
             worst = {m: min(t - f for t, f in zip(scores[m]["psnr"], scores["fbf"]["psnr"])) for m in methods}
             shares = {m: history_shares(os.path.join(out, m + ".log")) for m in methods
                       if m not in ("fbf", "oidn", "prefilter")}
@@ -141,8 +165,9 @@ def main():
                     note = f"worst frame {worst[m]:+.2f} dB vs fbf; {mean(shares[m]):.0f}% from history"
                     if times.get("fbf") and times.get(m) and m != "temporal":
                         note += f"; time x{times[m] / times['fbf']:.2f} of fbf"
+                jod = f" {s['fvvdp']:.3f} |" if s["fvvdp"] is not None else ""
                 print(f"| {scene} | {spp} | {m} | {mean(s['psnr']):.2f} | {mean(s['flip']):.4f} | "
-                      f"{mean(s['flicker']):.5f} | {note} |", flush=True)
+                      f"{mean(s['flicker']):.5f} |{jod} {note} |", flush=True)
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=1)
 

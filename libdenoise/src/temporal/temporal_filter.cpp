@@ -148,18 +148,14 @@ motion::FrameGeometry geometryOf(const WindowFrame& frame) {
   return {&frame.guides, &frame.motion};
 }
 
-}  // namespace
-
-namespace {
-
 // What the centre frame holds for the tests, computed once per frame.
 struct Centre {
   const WindowFrame* frame;
-  double scale;             // the exposure that brings its mean to 0.18
-  Image mapped;             // its result, tonemapped
-  Image noisyMapped;        // its render, tonemapped
-  Image residual;           // noisyMapped - mapped: its noise, as the denoiser saw it
-  std::vector<float> noise; // the local level of that noise
+  double scale;              // the exposure that brings its mean to 0.18
+  Image mapped;              // its result, tonemapped
+  Image noisyMapped;         // its render, tonemapped
+  Image residual;            // noisyMapped - mapped: its noise, as the denoiser saw it
+  std::vector<float> noise;  // the local level of that noise
 };
 
 Centre centreOf(const WindowFrame& frame) {
@@ -222,8 +218,8 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     if (w <= 0.0) continue;
     if (spread > 0.0) {
       const double z = d[i] / spread;
-      w *= std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0,
-                      1.0);
+      w *=
+          std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0, 1.0);
     }
     w *= std::clamp((options.lightHigh - changed[i]) / (options.lightHigh - options.lightLow), 0.0,
                     1.0);
@@ -240,7 +236,8 @@ void forEach(std::size_t count, int threads, const std::function<void(std::size_
     for (std::size_t i = next++; i < count; i = next++) task(i);
   };
   std::vector<std::thread> pool;
-  for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t) pool.emplace_back(worker);
+  for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t)
+    pool.emplace_back(worker);
   worker();
   for (auto& t : pool) t.join();
 }
