@@ -1,5 +1,6 @@
 #include <doctest/doctest.h>
 
+#include <OpenImageIO/half.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -291,6 +292,54 @@ TEST_CASE("results are written beside every input layer, atomically") {
   options.half = false;
   writeResult(dir / "in.exr", dir / "plain.exr", result, options);
   CHECK(readImage(dir / "plain.exr", 0).pixels == result.pixels);
+}
+
+namespace {
+
+// Channel `name` of an EXR as stored (half or float), as raw bytes per pixel.
+std::vector<unsigned char> storedBytes(const std::string& path, const std::string& name) {
+  auto in = OIIO::ImageInput::open(path);
+  REQUIRE(in);
+  const OIIO::ImageSpec& spec = in->spec();
+  const int c = spec.channelindex(name);
+  REQUIRE(c >= 0);
+  const OIIO::TypeDesc type = spec.channelformat(c);
+  std::vector<unsigned char> bytes(spec.image_pixels() * type.size());
+  REQUIRE(in->read_image(0, 0, c, c + 1, type, bytes.data()));
+  return bytes;
+}
+
+}  // namespace
+
+TEST_CASE("kept layers are written as stored: half and float channels bit for bit") {
+  TempDir dir;
+  const int w = 7, h = 5;
+  const std::vector<std::string> names = {"ViewLayer.Combined.R", "ViewLayer.Combined.G",
+                                          "ViewLayer.Combined.B", "ViewLayer.Depth.Z",
+                                          "ViewLayer.Vector.X"};
+  OIIO::ImageSpec spec(w, h, 5, OIIO::TypeDesc::HALF);
+  spec.channelnames = names;
+  spec.channelformats = {OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF,
+                         OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::HALF};
+  std::vector<float> pixels(w * h * 5);
+  for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = 1e4f * std::sin(0.37f * i) + 1e-3f;
+  {
+    auto out = OIIO::ImageOutput::create(dir / "mixed.exr");
+    REQUIRE(out);
+    REQUIRE(out->open(dir / "mixed.exr", spec));
+    REQUIRE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
+    REQUIRE(out->close());
+  }
+  WriteOptions options;
+  options.layer = "ViewLayer.Denoised";
+  const Image result = ramp(w, h, 3, 2.0f);
+  writeResult(dir / "mixed.exr", dir / "out.exr", result, options);
+  for (const auto& name : names)
+    CHECK(storedBytes(dir / "out.exr", name) == storedBytes(dir / "mixed.exr", name));
+  const Image denoised = readImage(
+      dir / "out.exr", 0, {"ViewLayer.Denoised.R", "ViewLayer.Denoised.G", "ViewLayer.Denoised.B"});
+  for (std::size_t i = 0; i < result.pixels.size(); ++i)
+    CHECK(denoised.pixels[i] == float(half(result.pixels[i])));
 }
 
 TEST_CASE("the input is never overwritten and failed writes leave nothing") {

@@ -949,35 +949,102 @@ std::vector<OutputPart> planOutputParts(const ChannelTable& table,
   return parts;
 }
 
-// Copies one output part strip by strip: the kept source channels, then the
-// added layers inside the result's window.
+bool halfOrFloat(OIIO::TypeDesc type) {
+  return type == OIIO::TypeDesc::HALF || type == OIIO::TypeDesc::FLOAT;
+}
+
+// Byte offsets of each channel in a pixel stored as `spec` says, and the
+// pixel's size.
+std::vector<int> nativeOffsets(const OIIO::ImageSpec& spec, int& pixelBytes) {
+  std::vector<int> offsets;
+  pixelBytes = 0;
+  for (int c = 0; c < spec.nchannels; ++c) {
+    offsets.push_back(pixelBytes);
+    pixelBytes += static_cast<int>(spec.channelformat(c).size());
+  }
+  return offsets;
+}
+
+// A run of bytes copied unchanged from a source pixel to an output pixel.
+struct ByteRun {
+  int from, to, bytes;
+};
+
+// The kept channels as runs of consecutive bytes (usually one run).
+std::vector<ByteRun> keptRuns(const OutputPart& part, const OIIO::ImageSpec& source) {
+  int inBytes = 0, outBytes = 0;
+  const std::vector<int> in = nativeOffsets(source, inBytes);
+  std::vector<ByteRun> runs;
+  for (int k : part.kept) {
+    const int size = static_cast<int>(source.channelformat(k).size());
+    if (!runs.empty() && runs.back().from + runs.back().bytes == in[k])
+      runs.back().bytes += size;
+    else
+      runs.push_back({in[k], outBytes, size});
+    outBytes += size;
+  }
+  return runs;
+}
+
+// Copies one output part strip by strip: the kept source channels as stored
+// (half stays half: no conversion, which was most of the write's time), then
+// the added layers inside the result's window. A source with channels other
+// than half or float goes through float.
 void writePart(OIIO::ImageInput& in, OIIO::ImageOutput& out, const OutputPart& part,
                const ChannelTable& table, const std::vector<AddedLayer>& added,
                const PixelWindow& window, const std::string& sourcePath,
                const std::string& outPath) {
   const OIIO::ImageSpec& spec = part.spec;
-  const int rows = part.sourcePart >= 0 ? stripRows(table.parts[part.sourcePart].spec) : kStripRows;
-  const int inChannels = part.sourcePart >= 0 ? table.parts[part.sourcePart].spec.nchannels : 0;
-  std::vector<float> inStrip(static_cast<std::size_t>(spec.width) * rows * std::max(1, inChannels));
-  std::vector<float> outStrip(static_cast<std::size_t>(spec.width) * rows * spec.nchannels);
+  const OIIO::ImageSpec* source =
+      part.sourcePart >= 0 ? &table.parts[part.sourcePart].spec : nullptr;
+  bool native = true;
+  for (int c = 0; c < spec.nchannels; ++c) native = native && halfOrFloat(spec.channelformat(c));
+  for (int c = 0; source && c < source->nchannels; ++c)
+    native = native && halfOrFloat(source->channelformat(c));
+  const OIIO::TypeDesc request = native ? OIIO::TypeDesc::UNKNOWN : OIIO::TypeDesc::FLOAT;
+  OIIO::ImageSpec asFloat;
+  auto layoutOf = [&](const OIIO::ImageSpec& s) -> const OIIO::ImageSpec& {
+    if (native) return s;
+    asFloat = s;
+    asFloat.channelformats.assign(s.nchannels, OIIO::TypeDesc::FLOAT);
+    return asFloat;
+  };
+  int inPixel = 0, outPixel = 0;
+  const std::vector<ByteRun> runs =
+      source ? keptRuns(part, layoutOf(*source)) : std::vector<ByteRun>();
+  if (source) nativeOffsets(layoutOf(*source), inPixel);
+  const std::vector<int> outOffsets = nativeOffsets(layoutOf(spec), outPixel);
+  const int rows = source ? stripRows(*source) : kStripRows;
+  std::vector<unsigned char> inStrip(static_cast<std::size_t>(spec.width) * rows *
+                                     std::max(1, inPixel));
+  std::vector<unsigned char> outStrip(static_cast<std::size_t>(spec.width) * rows * outPixel);
+  const int firstAdded = static_cast<int>(part.kept.size());
   for (int y0 = spec.y; y0 < spec.y + spec.height; y0 += rows) {
     const int y1 = std::min(spec.y + spec.height, y0 + rows);
-    if (part.sourcePart >= 0 &&
-        !readStrip(in, part.sourcePart, table.parts[part.sourcePart].spec, y0, y1, 0, inChannels,
-                   OIIO::TypeDesc::FLOAT, inStrip.data()))
+    if (source && !readStrip(in, part.sourcePart, *source, y0, y1, 0, source->nchannels, request,
+                             inStrip.data()))
       fail(sourcePath, "corrupt or truncated image data (" + firstLine(in.geterror()) + ")");
     for (int y = y0; y < y1; ++y)
       for (int x = spec.x; x < spec.x + spec.width; ++x) {
         const std::size_t pixel = static_cast<std::size_t>(y - y0) * spec.width + (x - spec.x);
-        float* dst = &outStrip[pixel * spec.nchannels];
-        for (int k : part.kept) *dst++ = inStrip[pixel * inChannels + k];
+        const unsigned char* from = &inStrip[pixel * inPixel];
+        unsigned char* to = &outStrip[pixel * outPixel];
+        for (const ByteRun& run : runs) std::memcpy(to + run.to, from + run.from, run.bytes);
         const int rx = x - window.x, ry = y - window.y;
         const bool inside = rx >= 0 && ry >= 0 && rx < window.width && ry < window.height;
+        int c = firstAdded;
         for (int a : part.addedLayers)
-          for (std::size_t k = 0; k < added[a].suffixes.size(); ++k)
-            *dst++ = inside ? addedValue(added[a], int(k), rx, ry) : 0.0f;
+          for (std::size_t k = 0; k < added[a].suffixes.size(); ++k, ++c) {
+            const float value = inside ? addedValue(added[a], int(k), rx, ry) : 0.0f;
+            if (native && spec.channelformat(c) == OIIO::TypeDesc::HALF) {
+              const half h(value);
+              std::memcpy(to + outOffsets[c], &h, sizeof h);
+            } else {
+              std::memcpy(to + outOffsets[c], &value, sizeof value);
+            }
+          }
       }
-    if (!out.write_scanlines(y0, y1, spec.z, OIIO::TypeDesc::FLOAT, outStrip.data()))
+    if (!out.write_scanlines(y0, y1, spec.z, request, outStrip.data()))
       fail(outPath, "write failed (" + firstLine(out.geterror()) + ")");
   }
 }
