@@ -1,6 +1,6 @@
 // The CPU allocator that keeps freed large blocks for reuse: the same block
-// comes back for the same size, the cache stays within its cap, small blocks
-// are left to malloc, and tensors made through it hold their values.
+// comes back for the same size or one up to a quarter smaller, the cache stays within its cap,
+// small blocks are left to malloc, and tensors made through it hold their values.
 #include "doctest_torch.h"
 
 #include "dn/nn/reusing_allocator.h"
@@ -52,6 +52,27 @@ TEST_CASE("a freed large block is reused for the same size, within the cap") {
 
   useReusingCpuAllocator(0);  // a lower cap frees what it holds
   CHECK(reusingCpuAllocatorCachedBytes() == 0);
+}
+
+TEST_CASE("a freed block serves a request up to a quarter smaller, and returns whole") {
+  useReusingCpuAllocator(0);
+  useReusingCpuAllocator(64 * kMiB);
+  void* first = nullptr;
+  {
+    torch::Tensor t = floats(10 * kMiB);
+    first = t.data_ptr();
+  }
+  {
+    torch::Tensor smaller = floats(9 * kMiB);
+    CHECK(smaller.data_ptr() == first);
+    CHECK(reusingCpuAllocatorCachedBytes() == 0);
+  }
+  CHECK(reusingCpuAllocatorCachedBytes() == 10 * kMiB);  // back at its full size
+  {
+    torch::Tensor muchSmaller = floats(7 * kMiB);  // 10 > 1.25 x 7: a new block
+    CHECK(muchSmaller.data_ptr() != first);
+  }
+  useReusingCpuAllocator(0);
 }
 
 TEST_CASE("tensors through the allocator compute as usual") {
