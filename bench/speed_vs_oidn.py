@@ -10,8 +10,9 @@ and the ratio of the median walls to OIDN's two modes:
 
 against dndenoise's default and the settings given by --modes (each a name and
 dndenoise flags; NAME=VALUE words among them go into its environment). Every process reads the frame, denoises and writes the
-result (dndenoise with --rgb-only, as OIDN's runner writes RGB), with the same
---threads. Times come from os.wait4 on each child, not from the tools' own lines.
+result (dndenoise with --rgb-only, as OIDN's runner writes RGB; the mode
+`all layers` writes the result beside every input layer, dndenoise's default
+output, to show what that costs), with the same --threads. Times come from os.wait4 on each child, not from the tools' own lines.
 
   speed_vs_oidn.py --bin build/bin [--model models/default.dnm] [--size 1920x1080]
                    [--rounds 3] [--threads 2] [--modes NAME=FLAGS;...] [--only NAME,...]
@@ -36,6 +37,7 @@ EXAMPLE = os.path.join(ROOT, "testdata", "example", "scene000201_4spp.exr")
 OIDN_RUNNER = os.path.join(ROOT, "experiments", "oidn_denoise.py")
 
 DEFAULT_MODES = ("high=-q high;high bf16=-q high --precision bf16;balanced (default)=;"
+                 "all layers=--all-layers;"
                  "balanced bf16=--precision bf16;fast=-q fast;fast bf16=-q fast --precision bf16;"
                  "control on=--control on;control on bf16=--control on --precision bf16")
 
@@ -103,8 +105,12 @@ def main():
         words = shlex.split(flags)
         env = dict(w.split("=", 1) for w in words if "=" in w and not w.startswith("-"))
         flags = [w for w in words if not ("=" in w and not w.startswith("-"))]
+        # --all-layers (the bench's, not dndenoise's): the result written beside every
+        # input layer, as dndenoise does by default, instead of RGB alone as OIDN's runner.
+        output = [] if "--all-layers" in flags else ["--rgb-only"]
+        flags = [w for w in flags if w != "--all-layers"]
         commands[name.strip()] = (env, [dndenoise, "--model", args.model, "--threads", str(args.threads),
-                                        "--rgb-only", *flags])
+                                        *output, *flags])
     if args.only:
         wanted = [n.strip() for n in args.only.split(",")]
         unknown = [n for n in wanted if n not in commands]
