@@ -12,7 +12,11 @@ saved as a multilayer EXR.
       --scene interior --out DIR --res 384x216 --spp 4 16 64 --ref-spp 1024 --threads 2
 
 writes DIR/<scene>_<N>spp.exr for each --spp and DIR/<scene>_ref.exr (adaptive
-sampling off, an independent seed). Files are written under a
+sampling off, an independent seed). With --frames N, an animation instead: the
+camera slides by --move (world units per frame) with its aim kept, the noise
+seed animated and the Vector pass on (motion blur off), written as
+DIR/spp<N>.<frame>.exr and DIR/ref.<frame>.exr, as experiments/temporal_eval.py
+reads them. Files are written under a
 temporary name and renamed when complete; existing ones are skipped.
 """
 
@@ -39,6 +43,8 @@ def parse_args():
     p.add_argument("--spp", type=int, nargs="+", default=[16, 64])
     p.add_argument("--ref-spp", type=int, default=2048)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--frames", type=int, default=0, help="N > 0: an animation of N frames")
+    p.add_argument("--move", default="0.05,0.03,0", help="the camera's move per frame, x,y,z")
     return p.parse_args(argv)
 
 
@@ -300,12 +306,37 @@ def render(scene, path, samples, seed, reference):
     os.replace(tmp, path)
 
 
+def animate(scene, args):
+    """The camera slides linearly over frames 1..N; the Vector pass and an animated seed."""
+    cam = bpy.data.objects["Camera"]
+    move = Vector(float(v) for v in args.move.split(","))
+    start = cam.location.copy()
+    for frame in (1, args.frames):
+        cam.location = start + (frame - 1) * move
+        cam.keyframe_insert("location", frame=frame)
+    for curve in cam.animation_data.action.fcurves:
+        for key in curve.keyframe_points:
+            key.interpolation = "LINEAR"
+    scene.frame_start, scene.frame_end = 1, args.frames
+    scene.render.use_motion_blur = False  # Cycles writes the Vector pass only without it
+    scene.view_layers[0].use_pass_vector = True
+    scene.cycles.use_animated_seed = True
+
+
 def main():
     args = parse_args()
     os.makedirs(args.out, exist_ok=True)
     globals()["build_" + args.scene]()
     scene = bpy.context.scene
     configure(scene, args)
+    if args.frames > 0:
+        animate(scene, args)
+        for frame in range(1, args.frames + 1):
+            scene.frame_set(frame)
+            for spp in args.spp:
+                render(scene, os.path.join(args.out, "spp%d.%04d.exr" % (spp, frame)), spp, spp, False)
+            render(scene, os.path.join(args.out, "ref.%04d.exr" % frame), args.ref_spp, 7919, True)
+        return
     for spp in args.spp:
         render(scene, os.path.join(args.out, "%s_%dspp.exr" % (args.scene, spp)), spp, spp, False)
     render(scene, os.path.join(args.out, "%s_ref.exr" % args.scene), args.ref_spp, 7919, True)
