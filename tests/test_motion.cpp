@@ -344,3 +344,15 @@ TEST_CASE("temporal filter: the result does not depend on the number of threads"
   CHECK(a.color.pixels == b.color.pixels);
   CHECK(a.stats.trusted == b.stats.trusted);
 }
+
+TEST_CASE("temporal filter: a neighbour that cannot be brought in throws, threads or not") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames;
+  for (unsigned t = 0; t < 3; ++t) frames.push_back(stillFrame(truth, 900 + t, 950 + t));
+  frames[2].motion = constantMotion(16, 12, 0, 0, 0, 0);  // not the frame's size
+  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  temporal::TemporalOptions two;
+  two.threads = 2;
+  CHECK_THROWS_AS(temporal::filterFrame(window, 1), std::invalid_argument);
+  CHECK_THROWS_AS(temporal::filterFrame(window, 1, two), std::invalid_argument);
+}

@@ -4,7 +4,9 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <exception>
 #include <functional>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 
@@ -229,17 +231,27 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   return out;
 }
 
-// Runs task(0 .. count-1) on up to `threads` threads.
+// Runs task(0 .. count-1) on up to `threads` threads; the first exception
+// thrown is rethrown here, after every thread has stopped.
 void forEach(std::size_t count, int threads, const std::function<void(std::size_t)>& task) {
   std::atomic<std::size_t> next{0};
+  std::exception_ptr failure;
+  std::mutex failureMutex;
   auto worker = [&] {
-    for (std::size_t i = next++; i < count; i = next++) task(i);
+    try {
+      for (std::size_t i = next++; i < count; i = next++) task(i);
+    } catch (...) {
+      next = count;  // the others stop after their current task
+      std::lock_guard<std::mutex> lock(failureMutex);
+      if (!failure) failure = std::current_exception();
+    }
   };
   std::vector<std::thread> pool;
   for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t)
     pool.emplace_back(worker);
   worker();
   for (auto& t : pool) t.join();
+  if (failure) std::rethrow_exception(failure);
 }
 
 }  // namespace
