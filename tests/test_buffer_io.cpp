@@ -314,32 +314,41 @@ std::vector<unsigned char> storedBytes(const std::string& path, const std::strin
 TEST_CASE("kept layers are written as stored: half and float channels bit for bit") {
   TempDir dir;
   const int w = 7, h = 5;
-  const std::vector<std::string> names = {"ViewLayer.Combined.R", "ViewLayer.Combined.G",
-                                          "ViewLayer.Combined.B", "ViewLayer.Depth.Z",
-                                          "ViewLayer.Vector.X"};
-  OIIO::ImageSpec spec(w, h, 5, OIIO::TypeDesc::HALF);
-  spec.channelnames = names;
-  spec.channelformats = {OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF,
-                         OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::HALF};
-  std::vector<float> pixels(w * h * 5);
-  for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = 1e4f * std::sin(0.37f * i) + 1e-3f;
-  {
-    auto out = OIIO::ImageOutput::create(dir / "mixed.exr");
-    REQUIRE(out);
-    REQUIRE(out->open(dir / "mixed.exr", spec));
-    REQUIRE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
-    REQUIRE(out->close());
+  // With an object-index channel (uint) the file goes through float, as before.
+  for (const bool withIndex : {false, true}) {
+    CAPTURE(withIndex);
+    OIIO::ImageSpec spec(w, h, withIndex ? 6 : 5, OIIO::TypeDesc::HALF);
+    spec.channelnames = {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B",
+                         "ViewLayer.Depth.Z", "ViewLayer.Vector.X"};
+    spec.channelformats = {OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF,
+                           OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::HALF};
+    if (withIndex) {
+      spec.channelnames.push_back("ViewLayer.IndexOB.X");
+      spec.channelformats.push_back(OIIO::TypeDesc::UINT);
+    }
+    std::vector<float> pixels(w * h * spec.nchannels);
+    for (std::size_t i = 0; i < pixels.size(); ++i)
+      pixels[i] = i % spec.nchannels == 5 ? float(i % 7) : 1e4f * std::sin(0.37f * i) + 1e-3f;
+    const std::string input = dir / ("mixed" + std::to_string(withIndex) + ".exr");
+    const std::string output = dir / ("out" + std::to_string(withIndex) + ".exr");
+    {
+      auto out = OIIO::ImageOutput::create(input);
+      REQUIRE(out);
+      REQUIRE(out->open(input, spec));
+      REQUIRE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
+      REQUIRE(out->close());
+    }
+    WriteOptions options;
+    options.layer = "ViewLayer.Denoised";
+    const Image result = ramp(w, h, 3, 2.0f);
+    writeResult(input, output, result, options);
+    for (const auto& name : spec.channelnames)
+      CHECK(storedBytes(output, name) == storedBytes(input, name));
+    const Image denoised = readImage(
+        output, 0, {"ViewLayer.Denoised.R", "ViewLayer.Denoised.G", "ViewLayer.Denoised.B"});
+    for (std::size_t i = 0; i < result.pixels.size(); ++i)
+      CHECK(denoised.pixels[i] == float(half(result.pixels[i])));
   }
-  WriteOptions options;
-  options.layer = "ViewLayer.Denoised";
-  const Image result = ramp(w, h, 3, 2.0f);
-  writeResult(dir / "mixed.exr", dir / "out.exr", result, options);
-  for (const auto& name : names)
-    CHECK(storedBytes(dir / "out.exr", name) == storedBytes(dir / "mixed.exr", name));
-  const Image denoised = readImage(
-      dir / "out.exr", 0, {"ViewLayer.Denoised.R", "ViewLayer.Denoised.G", "ViewLayer.Denoised.B"});
-  for (std::size_t i = 0; i < result.pixels.size(); ++i)
-    CHECK(denoised.pixels[i] == float(half(result.pixels[i])));
 }
 
 TEST_CASE("the input is never overwritten and failed writes leave nothing") {

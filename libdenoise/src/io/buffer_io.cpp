@@ -953,15 +953,12 @@ bool halfOrFloat(OIIO::TypeDesc type) {
   return type == OIIO::TypeDesc::HALF || type == OIIO::TypeDesc::FLOAT;
 }
 
-// Byte offsets of each channel in a pixel stored as `spec` says, and the
-// pixel's size.
-std::vector<int> nativeOffsets(const OIIO::ImageSpec& spec, int& pixelBytes) {
-  std::vector<int> offsets;
-  pixelBytes = 0;
-  for (int c = 0; c < spec.nchannels; ++c) {
-    offsets.push_back(pixelBytes);
-    pixelBytes += static_cast<int>(spec.channelformat(c).size());
-  }
+// Byte offsets of each channel in a pixel laid out as `spec` says; the last
+// entry is the pixel's size.
+std::vector<int> byteOffsets(const OIIO::ImageSpec& spec) {
+  std::vector<int> offsets = {0};
+  for (int c = 0; c < spec.nchannels; ++c)
+    offsets.push_back(offsets.back() + static_cast<int>(spec.channelformat(c).size()));
   return offsets;
 }
 
@@ -970,18 +967,18 @@ struct ByteRun {
   int from, to, bytes;
 };
 
-// The kept channels as runs of consecutive bytes (usually one run).
-std::vector<ByteRun> keptRuns(const OutputPart& part, const OIIO::ImageSpec& source) {
-  int inBytes = 0, outBytes = 0;
-  const std::vector<int> in = nativeOffsets(source, inBytes);
+// The kept channels as runs of consecutive bytes (usually one run), given the
+// source pixel's byte offsets.
+std::vector<ByteRun> keptRuns(const OutputPart& part, const std::vector<int>& in) {
   std::vector<ByteRun> runs;
+  int to = 0;
   for (int k : part.kept) {
-    const int size = static_cast<int>(source.channelformat(k).size());
+    const int size = in[k + 1] - in[k];
     if (!runs.empty() && runs.back().from + runs.back().bytes == in[k])
       runs.back().bytes += size;
     else
-      runs.push_back({in[k], outBytes, size});
-    outBytes += size;
+      runs.push_back({in[k], to, size});
+    to += size;
   }
   return runs;
 }
@@ -1002,18 +999,14 @@ void writePart(OIIO::ImageInput& in, OIIO::ImageOutput& out, const OutputPart& p
   for (int c = 0; source && c < source->nchannels; ++c)
     native = native && halfOrFloat(source->channelformat(c));
   const OIIO::TypeDesc request = native ? OIIO::TypeDesc::UNKNOWN : OIIO::TypeDesc::FLOAT;
-  OIIO::ImageSpec asFloat;
-  auto layoutOf = [&](const OIIO::ImageSpec& s) -> const OIIO::ImageSpec& {
-    if (native) return s;
-    asFloat = s;
-    asFloat.channelformats.assign(s.nchannels, OIIO::TypeDesc::FLOAT);
-    return asFloat;
+  auto layoutOf = [native](OIIO::ImageSpec s) {  // the strips' layout
+    if (!native) s.channelformats.assign(s.nchannels, OIIO::TypeDesc::FLOAT);
+    return s;
   };
-  int inPixel = 0, outPixel = 0;
-  const std::vector<ByteRun> runs =
-      source ? keptRuns(part, layoutOf(*source)) : std::vector<ByteRun>();
-  if (source) nativeOffsets(layoutOf(*source), inPixel);
-  const std::vector<int> outOffsets = nativeOffsets(layoutOf(spec), outPixel);
+  const std::vector<int> inOffsets = source ? byteOffsets(layoutOf(*source)) : std::vector<int>{0};
+  const std::vector<int> outOffsets = byteOffsets(layoutOf(spec));
+  const int inPixel = inOffsets.back(), outPixel = outOffsets.back();
+  const std::vector<ByteRun> runs = source ? keptRuns(part, inOffsets) : std::vector<ByteRun>();
   const int rows = source ? stripRows(*source) : kStripRows;
   std::vector<unsigned char> inStrip(static_cast<std::size_t>(spec.width) * rows *
                                      std::max(1, inPixel));
