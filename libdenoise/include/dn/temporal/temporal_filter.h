@@ -8,14 +8,13 @@
 #include <vector>
 
 #include "dn/image.h"
-#include "dn/io/buffers.h"
 #include "dn/motion/motion.h"
 #include "dn/motion/reproject.h"
 
 namespace dn::temporal {
 
 // One frame of the window: the denoised result, the noisy render (for the
-// repeated-noise test), its guides and its motion.
+// noise level, the light and the repeated-noise tests), its guides and motion.
 struct WindowFrame {
   Image denoised;  // 3 channels, linear
   Image noisy;     // 3 channels, linear
