@@ -82,6 +82,18 @@ TEST_CASE("tiled output equals the untiled output for a local operator") {
   CHECK((seamy - full).abs().max().item<float>() > 1e-3);
 }
 
+TEST_CASE("full-height columns: fewer pixels run than squares, the same blend") {
+  torch::manual_seed(1);
+  auto x = torch::randn({1, 3, 40, 90}), aux = torch::randn({1, 5, 40, 90});
+  const Tiler columns(40, 90, 40, 32, 8), squares(40, 90, 32, 8);
+  for (const auto& r : columns.tiles()) CHECK((r.y0 == 0 && r.height == 40 && r.width == 32));
+  CHECK(columns.tiles().size() == 4);  // starts 0, 24, 48, 58
+  CHECK(tiledPixels(columns) == 4 * 40 * 32);
+  CHECK(tiledPixels(columns) < tiledPixels(squares));
+  const auto full = localOperator({x, aux});
+  CHECK((columns.apply({x, aux}, localOperator) - full).abs().max().item<float>() < 1e-5);
+}
+
 TEST_CASE("memory-bounded tile sizes") {
   CHECK(tileSizeForMemory(1e9, 1000.0, 16) == 992);  // sqrt(1e6) = 1000 -> 992
   CHECK(tileSizeForMemory(10.0, 1000.0, 16) == 16);

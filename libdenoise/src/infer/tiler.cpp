@@ -40,9 +40,12 @@ torch::Tensor ramp(int64_t start, int64_t length, int64_t size, int64_t overlap,
 }  // namespace
 
 Tiler::Tiler(int64_t height, int64_t width, int64_t tile, int64_t overlap)
+    : Tiler(height, width, tile, tile, overlap) {}
+
+Tiler::Tiler(int64_t height, int64_t width, int64_t tileHeight, int64_t tileWidth, int64_t overlap)
     : height_(height), width_(width) {
-  const int64_t th = tile > 0 ? std::min(tile, height) : height;
-  const int64_t tw = tile > 0 ? std::min(tile, width) : width;
+  const int64_t th = tileHeight > 0 ? std::min(tileHeight, height) : height;
+  const int64_t tw = tileWidth > 0 ? std::min(tileWidth, width) : width;
   overlap_ = std::clamp<int64_t>(overlap, 0, std::min(th, tw) / 2);
   margin_ = overlap_ / 4;
   for (int64_t y : starts(height, th, overlap_))
@@ -83,6 +86,12 @@ torch::Tensor Tiler::apply(const std::function<torch::Tensor(const TileRect&)>& 
     crop(weightSum, r).add_(w);
   }
   return sum.div_(weightSum.clamp_min_(1e-12));  // in place: one full-frame output, not two
+}
+
+int64_t tiledPixels(const Tiler& tiler) {
+  int64_t pixels = 0;
+  for (const auto& r : tiler.tiles()) pixels += r.height * r.width;
+  return pixels;
 }
 
 int64_t tileSizeForMemory(double bytes, double bytesPerPixel, int64_t multiple) {

@@ -23,6 +23,8 @@ class Tiler {
  public:
   // tile <= 0 or >= the frame: one tile. The overlap is clamped to tile / 2.
   Tiler(int64_t height, int64_t width, int64_t tile, int64_t overlap);
+  // Tiles of tileHeight x tileWidth (each <= 0: the frame's size).
+  Tiler(int64_t height, int64_t width, int64_t tileHeight, int64_t tileWidth, int64_t overlap);
 
   const std::vector<TileRect>& tiles() const { return tiles_; }
   // Pixels this far from an inner tile edge get zero weight, so any operator
@@ -48,5 +50,9 @@ class Tiler {
 // Tile size whose network activations stay under `bytes`, given the measured
 // or estimated bytes per pixel of one forward pass; a multiple of `multiple`.
 int64_t tileSizeForMemory(double bytes, double bytesPerPixel, int64_t multiple);
+
+// Pixels the networks process over all tiles of a layout (overlaps counted
+// every time they are run).
+int64_t tiledPixels(const Tiler& tiler);
 
 }  // namespace dn
