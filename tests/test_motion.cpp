@@ -255,6 +255,23 @@ temporal::WindowFrame stillFrame(const Synthetic& truth, unsigned noiseSeed,
   return f;
 }
 
+// `count` frames of a still shot, their seeds counting up from the two given.
+std::vector<temporal::WindowFrame> stillShot(const Synthetic& truth, unsigned count,
+                                             unsigned noiseSeed, unsigned leftoverSeed) {
+  std::vector<temporal::WindowFrame> frames;
+  for (unsigned t = 0; t < count; ++t)
+    frames.push_back(stillFrame(truth, noiseSeed + t, leftoverSeed + t));
+  return frames;
+}
+
+// The window over every frame given.
+std::vector<const temporal::WindowFrame*> windowOf(
+    const std::vector<temporal::WindowFrame>& frames) {
+  std::vector<const temporal::WindowFrame*> window;
+  for (const auto& f : frames) window.push_back(&f);
+  return window;
+}
+
 double meanSquaredError(const Image& a, const Image& b) {
   double s = 0.0;
   for (std::size_t i = 0; i < a.pixels.size(); ++i) s += std::pow(a.pixels[i] - b.pixels[i], 2);
@@ -265,10 +282,8 @@ double meanSquaredError(const Image& a, const Image& b) {
 
 TEST_CASE("temporal filter: independent leftovers average down; repeated noise does no harm") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames;
-  for (unsigned t = 0; t < 5; ++t) frames.push_back(stillFrame(truth, 100 + t, 200 + t));
-  std::vector<const temporal::WindowFrame*> window;
-  for (const auto& f : frames) window.push_back(&f);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 100, 200);
+  const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
   const temporal::TemporalResult r = temporal::filterFrame(window, 2);
   CHECK(r.stats.neighbours == 4);
   CHECK(r.stats.repeatedNoise == 0);
@@ -278,9 +293,7 @@ TEST_CASE("temporal filter: independent leftovers average down; repeated noise d
 
   // A fixed seed on a still camera: every frame the same noise and the same result.
   std::vector<temporal::WindowFrame> repeated(5, stillFrame(truth, 7, 8));
-  std::vector<const temporal::WindowFrame*> repeatedWindow;
-  for (const auto& f : repeated) repeatedWindow.push_back(&f);
-  const temporal::TemporalResult same = temporal::filterFrame(repeatedWindow, 2);
+  const temporal::TemporalResult same = temporal::filterFrame(windowOf(repeated), 2);
   CHECK(same.stats.repeatedNoise == 4);
   CHECK(same.stats.historyShare == 0.0);
   CHECK(same.color.pixels == repeated[2].denoised.pixels);
@@ -293,8 +306,7 @@ TEST_CASE("temporal filter: independent leftovers average down; repeated noise d
 
 TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames;
-  for (unsigned t = 0; t < 3; ++t) frames.push_back(stillFrame(truth, 300 + t, 400 + t));
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 300, 400);
   // The next frame has a shadow (a quarter of the light) over x < 12.
   for (int y = 0; y < 24; ++y)
     for (int x = 0; x < 12; ++x)
@@ -302,7 +314,7 @@ TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") 
         frames[2].denoised.at(x, y, c) *= 0.25f;
         frames[2].noisy.at(x, y, c) *= 0.25f;
       }
-  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
   const temporal::TemporalResult r = temporal::filterFrame(window, 1);
   // Inside the shadow's region the result stays near the current frame's light,
   // at most a few percent darker, not the 3/8 darker a blind average would give.
@@ -314,15 +326,14 @@ TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") 
 
 TEST_CASE("temporal filter: a light change over the whole frame leaves the neighbour out") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames;
-  for (unsigned t = 0; t < 3; ++t) frames.push_back(stillFrame(truth, 500 + t, 600 + t));
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 500, 600);
   // A lamp moved: the neighbours are lit 20% brighter everywhere, too faint a
   // change for the per-pixel tests at this noise, too wide to be a shadow.
   for (unsigned t : {0u, 2u}) {
     for (float& v : frames[t].denoised.pixels) v *= 1.2f;
     for (float& v : frames[t].noisy.pixels) v *= 1.2f;
   }
-  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
   const temporal::TemporalResult r = temporal::filterFrame(window, 1);
   CHECK(r.stats.changedLight == 2);
   CHECK(r.stats.historyShare == 0.0);
@@ -331,10 +342,8 @@ TEST_CASE("temporal filter: a light change over the whole frame leaves the neigh
 
 TEST_CASE("temporal filter: the result does not depend on the number of threads") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames;
-  for (unsigned t = 0; t < 7; ++t) frames.push_back(stillFrame(truth, 700 + t, 800 + t));
-  std::vector<const temporal::WindowFrame*> window;
-  for (const auto& f : frames) window.push_back(&f);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 7, 700, 800);
+  const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
   temporal::TemporalOptions one, four;
   one.radius = four.radius = 3;
   four.threads = 4;
@@ -347,10 +356,9 @@ TEST_CASE("temporal filter: the result does not depend on the number of threads"
 
 TEST_CASE("temporal filter: a neighbour that cannot be brought in throws, threads or not") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames;
-  for (unsigned t = 0; t < 3; ++t) frames.push_back(stillFrame(truth, 900 + t, 950 + t));
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 900, 950);
   frames[2].motion = constantMotion(16, 12, 0, 0, 0, 0);  // not the frame's size
-  std::vector<const temporal::WindowFrame*> window = {&frames[0], &frames[1], &frames[2]};
+  const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
   temporal::TemporalOptions two;
   two.threads = 2;
   CHECK_THROWS_AS(temporal::filterFrame(window, 1), std::invalid_argument);

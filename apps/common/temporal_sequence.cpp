@@ -155,22 +155,21 @@ DenoiseResult TemporalSequence::denoise(const std::string& input, const FrameBuf
   const int radius = settings_.radius;
   forget(n);
   lastNumber_ = n;
-  std::vector<std::shared_ptr<const DenoiseResult>> held;
-  std::vector<std::shared_ptr<const Input>> sources;
+  // The window's frames stay held by inputs_ until the next call's forget().
+  std::shared_ptr<const DenoiseResult> centre;
   std::vector<const temporal::WindowFrame*> window;
   for (int m = n - radius; m <= n + radius; ++m) {
     auto result = estimate(m, m == n ? &frame : nullptr, read, denoise);
+    if (m == n) centre = result;
     auto source = result ? this->input(m, nullptr, read) : nullptr;
     const bool usable = source && source->frame.denoised.sameShape(frame.get("color"));
-    held.push_back(result);
-    sources.push_back(source);
     window.push_back(usable ? &source->frame : nullptr);
   }
   temporal::TemporalOptions options = settings_.filter;
   options.radius = radius;
   temporal::TemporalResult filtered = temporal::filterFrame(window, radius, options);
   lastStats_ = filtered.stats;
-  DenoiseResult result = *held[radius];
+  DenoiseResult result = *centre;
   result.color = std::move(filtered.color);
   return result;
 }
