@@ -8,20 +8,27 @@
 //   denoise_npy_bench --input DIR [--model models/default.dnm]
 //       [--modes base,prefilter,split,control] [--devices cpu,cuda]
 //       [--repeats N] [--warmup N] [--threads N] [--tf32 on|off] [--output DIR]
-//       [--reference DIR]
+//       [--reference DIR] [--bfloat16 on|off] [--cudnn-benchmark on|off]
+//       [--max-memory GB] [--trace DIR]
 //
 // DIR holds one file per buffer, named by its canonical name (color.npy,
 // albedo.npy, normal.npy, diffuse_direct.npy, ...), each (height, width,
 // channels) float32 or float16. Outputs are written as OUT/<mode>_<device>.npy;
 // --reference DIR compares with DIR/<mode>_cpu.npy (an earlier CPU run) instead
-// of this run's first device. Lines "RESULT key=value ..." are for scripts.
+// of this run's first device. --trace DIR profiles one more run of each mode
+// with LibTorch's Kineto profiler (CPU operators and CUDA kernels) and writes
+// its Chrome trace as DIR/<mode>_<device>.json (bench/gpu/trace_summary.py
+// reads it). Lines "RESULT key=value ..." are for scripts.
+#include <torch/csrc/autograd/profiler_kineto.h>
 #include <torch/torch.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <map>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -37,11 +44,14 @@ namespace fs = std::filesystem;
 namespace {
 
 struct Args {
-  std::string input, output, reference, model = "models/default.dnm";
+  std::string input, output, reference, trace, model = "models/default.dnm";
   std::vector<std::string> modes = {"base", "prefilter", "split", "control"};
   std::vector<std::string> devices = {"cpu"};
   int repeats = 3, warmup = 1, threads = 0;
   bool tf32 = true;  // LibTorch's default for cuDNN convolutions
+  bool bfloat16 = false;
+  bool cudnnBenchmark = false;  // LibTorch's default
+  double maxMemoryGB = 0;       // 0: DenoiseOptions' default
 };
 
 struct UsageError : std::runtime_error {
@@ -94,6 +104,14 @@ Args parseArgs(int argc, char** argv) {
       args.threads = positive(flag, value, 1);
     else if (flag == "--tf32" && (value == "on" || value == "off"))
       args.tf32 = value == "on";
+    else if (flag == "--bfloat16" && (value == "on" || value == "off"))
+      args.bfloat16 = value == "on";
+    else if (flag == "--cudnn-benchmark" && (value == "on" || value == "off"))
+      args.cudnnBenchmark = value == "on";
+    else if (flag == "--max-memory")
+      args.maxMemoryGB = positive(flag, value, 1);
+    else if (flag == "--trace")
+      args.trace = value;
     else
       throw UsageError("unknown argument " + flag + " " + value);
   }
@@ -132,9 +150,11 @@ dn::FrameBuffers readFrame(const std::string& dir) {
   return frame;
 }
 
-dn::DenoiseOptions optionsFor(const std::string& mode, torch::Device device) {
+dn::DenoiseOptions optionsFor(const std::string& mode, torch::Device device, const Args& args) {
   dn::DenoiseOptions options;
   options.device = device;
+  options.bfloat16 = args.bfloat16;
+  if (args.maxMemoryGB > 0) options.maxMemoryBytes = args.maxMemoryGB * 1e9;
   options.control = mode == "control" ? dn::ControlUse::Always : dn::ControlUse::Never;
   options.prefilter = mode != "base";
   // The module forced on over the defaults (it decides itself what it cleans).
@@ -157,6 +177,23 @@ double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
+// One call of fn under the Kineto profiler, its Chrome trace written to path.
+void traced(const std::string& path, const std::function<void()>& fn) {
+  namespace profiler = torch::autograd::profiler;
+  using torch::profiler::impl::ActivityType;
+  const torch::profiler::impl::ProfilerConfig config(torch::profiler::impl::ProfilerState::KINETO);
+  std::set<ActivityType> activities = {ActivityType::CPU};
+  if (torch::cuda::is_available()) activities.insert(ActivityType::CUDA);
+  try {
+    profiler::prepareProfiler(config, activities);
+    profiler::enableProfiler(config, activities);
+    fn();
+    profiler::disableProfiler()->save(path);
+  } catch (const c10::Error& e) {  // e.g. a LibTorch built without Kineto (Debian's)
+    throw std::runtime_error(std::string("--trace: ") + e.what_without_backtrace());
+  }
+}
+
 double median(std::vector<double> values) {
   std::sort(values.begin(), values.end());
   const std::size_t n = values.size();
@@ -173,14 +210,16 @@ int run(const Args& args) {
   if (cuda) {
     at::globalContext().setAllowTF32CuDNN(args.tf32);
     at::globalContext().setAllowTF32CuBLAS(args.tf32);
+    at::globalContext().setBenchmarkCuDNN(args.cudnnBenchmark);
   }
   const dn::FrameBuffers frame = readFrame(args.input);
   const dn::Denoiser denoiser = dn::Denoiser::fromFile(args.model);
   if (!args.output.empty()) fs::create_directories(args.output);
   const std::string size = std::to_string(frame.width) + "x" + std::to_string(frame.height);
-  std::printf("%s, %zu buffers, %s, %d CPU thread(s), TF32 %s, median of %d after %d warm-up\n",
-              size.c_str(), frame.buffers.size(), args.model.c_str(), at::get_num_threads(), tf32,
-              args.repeats, args.warmup);
+  const char* precision = args.bfloat16 ? "bf16" : "float";
+  std::printf("%s, %zu buffers, %s, %d CPU thread(s), %s, TF32 %s, median of %d after %d warm-up\n",
+              size.c_str(), frame.buffers.size(), args.model.c_str(), at::get_num_threads(),
+              precision, tf32, args.repeats, args.warmup);
   std::printf("%-10s %-8s %10s %10s %12s\n", "mode", "device", "median s", "min s", "PSNR vs ref");
 
   for (const auto& mode : args.modes) {
@@ -191,7 +230,7 @@ int run(const Args& args) {
       referenceName = "cpu";
     }
     for (std::size_t d = 0; d < devices.size(); ++d) {
-      const dn::DenoiseOptions options = optionsFor(mode, devices[d]);
+      const dn::DenoiseOptions options = optionsFor(mode, devices[d], args);
       dn::DenoiseResult result;
       for (int i = 0; i < args.warmup; ++i) result = denoiser.denoise(frame, options);
       std::vector<double> times;
@@ -201,6 +240,11 @@ int run(const Args& args) {
         times.push_back(seconds(start));
       }
       checkMode(mode, result);
+      if (!args.trace.empty()) {
+        fs::create_directories(args.trace);
+        traced(args.trace + "/" + mode + "_" + args.devices[d] + ".json",
+               [&] { denoiser.denoise(frame, options); });
+      }
       const std::string device = devices[d].str();
       if (!args.output.empty())
         dn::npy::writeImage(args.output + "/" + mode + "_" + args.devices[d] + ".npy",
@@ -213,9 +257,11 @@ int run(const Args& args) {
       std::printf("%-10s %-8s %10.3f %10.3f %12s\n", mode.c_str(), device.c_str(), median(times),
                   best, compared ? std::to_string(psnr).c_str() : "-");
       std::printf(
-          "RESULT mode=%s device=%s size=%s tf32=%s threads=%d repeats=%d median_s=%.4f min_s=%.4f",
-          mode.c_str(), device.c_str(), size.c_str(), tf32, at::get_num_threads(), args.repeats,
-          median(times), best);
+          "RESULT mode=%s device=%s size=%s precision=%s tf32=%s cudnn_benchmark=%s tiles=%zu "
+          "threads=%d repeats=%d median_s=%.4f min_s=%.4f",
+          mode.c_str(), device.c_str(), size.c_str(), precision, tf32,
+          cuda ? (args.cudnnBenchmark ? "on" : "off") : "n/a", result.tileCount,
+          at::get_num_threads(), args.repeats, median(times), best);
       if (compared) std::printf(" psnr_vs_%s=%.2f", referenceName.c_str(), psnr);
       std::printf("\n");
       std::fflush(stdout);
@@ -235,7 +281,8 @@ int main(int argc, char** argv) {
         stderr,
         "usage: denoise_npy_bench --input DIR [--model PATH] [--modes base,prefilter,split,"
         "control]\n  [--devices cpu,cuda] [--repeats N] [--warmup N] [--threads N] "
-        "[--tf32 on|off] [--output DIR] [--reference DIR]\n");
+        "[--tf32 on|off] [--output DIR] [--reference DIR] [--bfloat16 on|off]\n"
+        "  [--cudnn-benchmark on|off] [--max-memory GB] [--trace DIR]\n");
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "denoise_npy_bench: %s\n", e.what());

@@ -172,6 +172,37 @@ TEST_CASE("OIDN's PU transfer function: normalised, monotonic, exactly inverted"
   }
 }
 
+TEST_CASE("inputs made and outputs decoded with tensor operations agree with the CPU's loops") {
+  // The GPU path's oidnInputOnDevice and oidnOutputDecodeOnDevice, run here on
+  // the CPU, against the scalar curves: to float rounding, NaN, Inf and
+  // negatives included.
+  FrameBuffers frame = readFrame(kCrop);
+  const float bad[] = {NAN, INFINITY, -1.0f, -INFINITY, 1e30f};
+  for (int i = 0; i < 5; ++i) {
+    frame.buffers["color"].pixels[size_t(37 * i)] = bad[i];
+    frame.buffers["albedo"].pixels[size_t(41 * i + 1)] = bad[i];
+    frame.buffers["normal"].pixels[size_t(43 * i + 2)] = bad[i];
+  }
+  const float exposure = tonemap::oidnExposure(frame.get("color"));
+  const TileRect all{0, 0, frame.height, frame.width}, part{5, 7, 40, 50};
+  for (const std::string name : {"hdr_alb_nrm", "hdr_calb_cnrm_large", "alb", "nrm"}) {
+    CAPTURE(name);
+    const OidnInputSet& set = oidnInputSet(name);
+    for (const TileRect& r : {all, part}) {
+      const torch::Tensor expected = oidnInput(frame, set, exposure, r);
+      const torch::Tensor made = oidnInputOnDevice(frame, set, exposure, r, torch::kCPU);
+      CHECK(made.sizes() == expected.sizes());
+      CHECK(torch::allclose(made, expected, 1e-5, 1e-7));
+    }
+    // Outputs past the encoded range's ends, and NaN.
+    torch::Tensor output = torch::rand({1, 3, 24, 24}) * 1.2 - 0.1;
+    output[0][0][0][0] = NAN;
+    const torch::Tensor expected = oidnOutputDecode(output.clone(), set, exposure);  // in place
+    const torch::Tensor decoded = oidnOutputDecodeOnDevice(output, set, exposure);
+    CHECK(torch::allclose(decoded, expected, 1e-5, 1e-7));
+  }
+}
+
 TEST_CASE("OIDN's autoexposure maps the mean luminance of bins to 0.18") {
   Image grey(40, 24, 3, 0.5f);
   CHECK(tonemap::oidnExposure(grey) == doctest::Approx(0.36f));

@@ -7,17 +7,24 @@
 #   doctest/     doctest's header and CMake package (for the core's tests)
 #   oidn/        with --with-oidn: OIDN 2.5.1's core and CUDA device from the
 #                pyoidn wheel, for OIDN's own CUDA timings (about 54 MB)
+#   build/       with --cuda-build DIR: denoise_npy_bench, test_device and
+#                test_npy from a core build against the GPU machine's PyTorch
+#                wheel (docs/dndenoise.md#gpu), stripped, so that the GPU run
+#                skips its build
 #
-#   bash bench/gpu/prepare_carry.sh [--with-oidn] [BUILD_DIR]
+#   bash bench/gpu/prepare_carry.sh [--with-oidn] [--cuda-build DIR] [BUILD_DIR]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 with_oidn=0
+cuda_build=
 build=build
-for arg in "$@"; do
-  case "$arg" in
+while [ $# -gt 0 ]; do
+  case "$1" in
     --with-oidn) with_oidn=1 ;;
-    *) build=$arg ;;
+    --cuda-build) cuda_build=$2; shift ;;
+    *) build=$1 ;;
   esac
+  shift
 done
 carry=bench/gpu/carry
 rm -rf "$carry"
@@ -55,6 +62,16 @@ if [ "$with_oidn" = 1 ]; then
   mkdir -p "$carry/oidn"
   cp "$lib/libOpenImageDenoise.so.2" "$lib/libOpenImageDenoise_core.so.2.5.1" \
      "$lib/libOpenImageDenoise_device_cuda.so.2.5.1" "$carry/oidn/"
+fi
+
+if [ -n "$cuda_build" ]; then
+  mkdir -p "$carry/build/bin"
+  for program in denoise_npy_bench test_device test_npy; do
+    strip -o "$carry/build/bin/$program" "$cuda_build/bin/$program"
+  done
+  sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$cuda_build/CMakeCache.txt" >"$carry/build/source_dir"
+  torch_dir=$(sed -n 's/^Torch_DIR:PATH=//p' "$cuda_build/CMakeCache.txt")  # torch/share/cmake/Torch
+  sed -n "s/^__version__ = '\(.*\)'$/\1/p" "$torch_dir/../../../version.py" >"$carry/build/torch_version"
 fi
 
 # What the device tool sends: tracked and untracked-not-ignored files, plus the carry.

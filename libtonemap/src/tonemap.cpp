@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "dn/pu_curve.h"
+
 namespace dn::tonemap {
 
 namespace {
@@ -37,23 +39,18 @@ float srgbDecode(float e) {
 }
 
 namespace {
-// The PU curve's pieces: a * y below y0, b * y^c + d below y1, e * log(y + f) + g above.
-constexpr float kPuA = 1.41283765e+03f, kPuB = 1.64593172e+00f, kPuC = 4.31384981e-01f,
-                kPuD = -2.94139609e-03f, kPuE = 1.92653254e-01f, kPuF = 6.26026094e-03f,
-                kPuG = 9.98620152e-01f, kPuY0 = 1.57945760e-06f, kPuY1 = 3.22087631e-02f,
-                kPuX0 = 2.23151711e-03f, kPuX1 = 3.70974749e-01f;
-constexpr float kHalfMax = 65504.0f;
+using namespace pu_curve;
 
 float puUnscaled(float y) {
-  if (y <= kPuY0) return kPuA * y;
-  if (y <= kPuY1) return kPuB * std::pow(y, kPuC) + kPuD;
-  return kPuE * std::log(y + kPuF) + kPuG;
+  if (y <= kY0) return kA * y;
+  if (y <= kY1) return kB * std::pow(y, kC) + kD;
+  return kE * std::log(y + kF) + kG;
 }
 
 float puUnscaledInverse(float x) {
-  if (x <= kPuX0) return x / kPuA;
-  if (x <= kPuX1) return std::pow((x - kPuD) / kPuB, 1.0f / kPuC);
-  return std::exp((x - kPuG) / kPuE) - kPuF;
+  if (x <= kX0) return x / kA;
+  if (x <= kX1) return std::pow((x - kD) / kB, 1.0f / kC);
+  return std::exp((x - kG) / kE) - kF;
 }
 
 const float kPuNorm = puUnscaled(kHalfMax);

@@ -5,7 +5,9 @@
 #include <limits>
 
 #include <ATen/Parallel.h>
+#include <ATen/record_function.h>
 
+#include "dn/pu_curve.h"
 #include "dn/tonemap.h"
 
 namespace dn {
@@ -14,6 +16,37 @@ namespace {
 float nanToZero(float v) { return std::isnan(v) ? 0.0f : v; }
 
 float encodeNormal(float v) { return std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f; }
+
+// libtonemap's curves as tensor operations, for inputs and outputs made on a
+// GPU: the same formulas in float, on values already clamped at 0.
+float puNorm() {  // the unscaled curve at 65504, as libtonemap computes it
+  using namespace tonemap::pu_curve;
+  return kE * std::log(kHalfMax + kF) + kG;
+}
+torch::Tensor puEncodeOnDevice(const torch::Tensor& y) {
+  using namespace tonemap::pu_curve;
+  return torch::where(y <= kY0, y * kA,
+                      torch::where(y <= kY1, y.pow(kC) * kB + kD, (y + kF).log() * kE + kG)) /
+         puNorm();
+}
+torch::Tensor puDecodeOnDevice(const torch::Tensor& t) {
+  using namespace tonemap::pu_curve;
+  const torch::Tensor x = t * puNorm();
+  return torch::where(
+      x <= kX0, x / kA,
+      torch::where(x <= kX1, ((x - kD) / kB).pow(1.0f / kC), ((x - kG) / kE).exp() - kF));
+}
+torch::Tensor srgbEncodeOnDevice(const torch::Tensor& v) {
+  return torch::where(v <= 0.0031308f, v * 12.92f, v.pow(1.0f / 2.4f) * 1.055f - 0.055f);
+}
+torch::Tensor srgbDecodeOnDevice(const torch::Tensor& e) {
+  return torch::where(e <= 0.04045f, e / 12.92f, ((e + 0.055f) / 1.055f).pow(2.4f));
+}
+
+torch::Tensor nanToZero(const torch::Tensor& t) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  return t.nan_to_num(0.0, kInf, -kInf);
+}
 
 // Fills three planes of `out` (h x w each) from a 3-channel image, or from a
 // 1-channel one broadcast, as OIDN does; rows in parallel.
@@ -80,8 +113,38 @@ torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, floa
   return input;
 }
 
+torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
+                                const TileRect& r, torch::Device device) {
+  std::vector<torch::Tensor> planes;
+  for (size_t b = 0; b < set.buffers.size(); ++b) {
+    const std::string& name = set.buffers[b];
+    const Image& image = frame.get(name);
+    // The region's pixels as stored (3 channels, or 1 broadcast), moved as they are.
+    torch::Tensor v = torch::from_blob(const_cast<float*>(image.pixels.data()),
+                                       {image.height, image.width, image.channels})
+                          .narrow(0, r.y0, r.height)
+                          .narrow(1, r.x0, r.width)
+                          .narrow(2, 0, image.channels >= 3 ? 3 : 1)
+                          .to(device)
+                          .permute({2, 0, 1})
+                          .expand({3, r.height, r.width});
+    v = nanToZero(v);
+    if (name == "color")
+      v = puEncodeOnDevice((v * exposure).clamp(0.0f, std::numeric_limits<float>::max()));
+    else if (name == "albedo" && b == 0)
+      v = srgbEncodeOnDevice(v.clamp(0.0f, 1.0f));
+    else if (name == "albedo")
+      v = v.clamp(0.0f, 1.0f);
+    else
+      v = v.clamp(-1.0f, 1.0f) * 0.5f + 0.5f;
+    planes.push_back(v);
+  }
+  return torch::cat(planes).unsqueeze(0);
+}
+
 torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& set,
                                float exposure) {
+  if (!output.is_cpu()) return oidnOutputDecodeOnDevice(output, set, exposure);
   auto out = output.to(torch::kCPU, torch::kFloat32).contiguous();
   float* p = out.data_ptr<float>();
   const float scale = exposure != 0.0f ? 1.0f / exposure : 0.0f;
@@ -99,6 +162,17 @@ torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& 
   else
     decode([](float v) { return std::clamp(v * 2.0f - 1.0f, -1.0f, 1.0f); });
   return out;
+}
+
+torch::Tensor oidnOutputDecodeOnDevice(const torch::Tensor& output, const OidnInputSet& set,
+                                       float exposure) {
+  const torch::Tensor v = nanToZero(output.to(torch::kFloat32)).clamp_min(0.0f);
+  if (set.denoised() == "color") {
+    const float scale = exposure != 0.0f ? 1.0f / exposure : 0.0f;
+    return (puDecodeOnDevice(v) * scale).clamp_max(std::numeric_limits<float>::max());
+  }
+  if (set.denoised() == "albedo") return srgbDecodeOnDevice(v).clamp_max(1.0f);
+  return (v * 2.0f - 1.0f).clamp(-1.0f, 1.0f);
 }
 
 double oidnBytesPerPixel(const OidnUNetConfig& config) {
@@ -129,16 +203,29 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
   result.tileCount = tiler.tiles().size();
 
   std::size_t done = 0;
+  // On a GPU the buffers move as stored and everything after runs there, up to
+  // the caller's one copy of the result back.
+  const bool onHost = options.device.is_cpu();
   result.image = tiler.apply([&](const TileRect& r) {
-    torch::Tensor x = oidnInput(frame, set, result.exposure, r);
-    const int64_t padH = (kOidnAlignment - r.height % kOidnAlignment) % kOidnAlignment;
-    const int64_t padW = (kOidnAlignment - r.width % kOidnAlignment) % kOidnAlignment;
-    x = torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0)
-            .to(options.device)
-            .contiguous(torch::MemoryFormat::ChannelsLast);
-    torch::Tensor y = (options.network ? options.network(x, r) : net->forward(x))
-                          .narrow(2, 0, r.height)
-                          .narrow(3, 0, r.width);
+    torch::Tensor x;
+    {
+      RECORD_FUNCTION("dn::oidnInput", std::vector<c10::IValue>());
+      x = onHost ? oidnInput(frame, set, result.exposure, r)
+                 : oidnInputOnDevice(frame, set, result.exposure, r, options.device);
+      const int64_t padH = (kOidnAlignment - r.height % kOidnAlignment) % kOidnAlignment;
+      const int64_t padW = (kOidnAlignment - r.width % kOidnAlignment) % kOidnAlignment;
+      x = torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0)
+              .to(options.device)
+              .contiguous(torch::MemoryFormat::ChannelsLast);
+    }
+    torch::Tensor y;
+    {
+      RECORD_FUNCTION("dn::network", std::vector<c10::IValue>());
+      y = (options.network ? options.network(x, r) : net->forward(x))
+              .narrow(2, 0, r.height)
+              .narrow(3, 0, r.width);
+    }
+    RECORD_FUNCTION("dn::oidnOutputDecode", std::vector<c10::IValue>());
     torch::Tensor decoded = oidnOutputDecode(y, set, result.exposure);
     if (options.progress) options.progress(double(++done) / tiler.tiles().size());
     return decoded;

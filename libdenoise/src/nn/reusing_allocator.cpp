@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <cstring>
 #include <map>
 #include <mutex>
 #include <new>
+#include <utility>
 
 #include <c10/core/Allocator.h>
 #include <c10/core/impl/alloc_cpu.h>
@@ -37,9 +39,16 @@ void* allocHuge(std::size_t bytes) {
 
 class ReusingCpuAllocator final : public c10::Allocator {
  public:
-  c10::DataPtr allocate(std::size_t bytes) const override {
+  // LibTorch 1.13 declares allocate const; 2.3 and later declare it non-const
+  // and add copy_data. Both forms are here, so that either LibTorch finds its
+  // own (the other is a plain member).
+  c10::DataPtr allocate(std::size_t bytes) const {
     void* data = take(bytes);
     return {data, data, &release, c10::Device(c10::DeviceType::CPU)};
+  }
+  c10::DataPtr allocate(std::size_t bytes) { return std::as_const(*this).allocate(bytes); }
+  void copy_data(void* dest, const void* src, std::size_t count) const {
+    std::memcpy(dest, src, count);
   }
   c10::DeleterFnPtr raw_deleter() const override { return &release; }
 

@@ -28,13 +28,22 @@ constexpr int64_t kOidnOverlapLarge = 112;
 constexpr int64_t kOidnMaxTilePixels = 2160 * 2160;
 
 // (1, 3 * buffers, h, w) network input for a region of `frame`, with the
-// colour multiplied by `exposure`.
+// colour multiplied by `exposure`, on the CPU.
 torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
                         const TileRect& region);
+// The same made on `device` with tensor operations from the buffers as
+// stored: what crosses to a GPU is the region's raw pixels. Agrees with
+// oidnInput to float rounding of the curves (test_oidn_base).
+torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
+                                const TileRect& region, torch::Device device);
 // Network output (1, 3, h, w) -> the set's denoised buffer in the frame's
-// units: linear HDR radiance, albedo in [0, 1] or normals in [-1, 1].
+// units: linear HDR radiance, albedo in [0, 1] or normals in [-1, 1]. A CPU
+// output is decoded on the CPU, any other where it is
+// (oidnOutputDecodeOnDevice, which takes any device).
 torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& set,
                                float exposure);
+torch::Tensor oidnOutputDecodeOnDevice(const torch::Tensor& output, const OidnInputSet& set,
+                                       float exposure);
 
 struct OidnRunOptions {
   float exposure = 0.0f;          // 0: OIDN's autoexposure
@@ -48,7 +57,7 @@ struct OidnRunOptions {
 };
 
 struct OidnRunResult {
-  torch::Tensor image;  // (1, 3, H, W) on the CPU: the set's denoised buffer
+  torch::Tensor image;  // (1, 3, H, W) on the run's device: the set's denoised buffer
   float exposure = 1.0f;
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
