@@ -1,6 +1,8 @@
-// The CPU allocator that keeps freed large blocks for reuse: the same block
-// comes back for the same size or one up to a quarter smaller, the cache stays within its cap,
-// small blocks are left to malloc, and tensors made through it hold their values.
+// The CPU allocator that keeps freed large blocks for reuse: a freed block
+// comes back for its size or serves smaller ones, pieces merge again when
+// freed, the cache stays within its cap and under the high-water mark of the
+// memory in use, small blocks are left to malloc, and tensors made through it
+// hold their values.
 #include "doctest_torch.h"
 
 #include "dn/nn/reusing_allocator.h"
@@ -13,38 +15,57 @@ constexpr std::size_t kMiB = std::size_t(1) << 20;
 
 torch::Tensor floats(std::size_t bytes) { return torch::empty({int64_t(bytes / sizeof(float))}); }
 
+const char* address(const torch::Tensor& t) { return static_cast<const char*>(t.data_ptr()); }
+
+void emptyCache(std::size_t cap) {
+  useReusingCpuAllocator(0);
+  useReusingCpuAllocator(cap);
+}
+
 }  // namespace
 
-TEST_CASE("a freed large block is reused for the same size, within the cap") {
-  useReusingCpuAllocator(64 * kMiB);
-  void* first = nullptr;
+TEST_CASE("a freed large block is reused, serves smaller ones and merges back whole") {
+  emptyCache(64 * kMiB);
+  const char* first = nullptr;
   {
     torch::Tensor t = floats(8 * kMiB);
-    first = t.data_ptr();
+    first = address(t);
   }
-  CHECK(reusingCpuAllocatorCachedBytes() == 8 * kMiB);
+  const std::size_t block = reusingCpuAllocatorCachedBytes();
+  CHECK(block >= 8 * kMiB);
   {
     torch::Tensor same = floats(8 * kMiB);
-    CHECK(same.data_ptr() == first);
+    CHECK(address(same) == first);
     CHECK(reusingCpuAllocatorCachedBytes() == 0);
-    torch::Tensor other = floats(4 * kMiB);  // another size: a new block
-    CHECK(other.data_ptr() != first);
   }
-  CHECK(reusingCpuAllocatorCachedBytes() == 12 * kMiB);
+  {
+    torch::Tensor a = floats(3 * kMiB), b = floats(3 * kMiB);  // both from the freed block
+    CHECK(address(a) == first);
+    CHECK(address(b) > first);
+    CHECK(address(b) + 3 * kMiB <= first + block);
+    CHECK(reusingCpuAllocatorCachedBytes() < block);
+  }
+  CHECK(reusingCpuAllocatorCachedBytes() == block);  // the pieces merged
+  torch::Tensor whole = floats(8 * kMiB);
+  CHECK(address(whole) == first);
+}
 
-  {  // freed beyond the cap: back to the system
+TEST_CASE("the cache stays within its cap and under the high-water mark") {
+  emptyCache(64 * kMiB);
+  {  // 12 blocks of 8 MiB in use at once, then freed: at most the cap is kept
     std::vector<torch::Tensor> many;
     for (int i = 0; i < 12; ++i) many.push_back(floats(8 * kMiB));
   }
-
-  // 12 blocks of 8 MiB were in use at once: a new 40 MiB block may not take
-  // blocks in use and cached past those 96 MiB, so one cached block goes.
-  REQUIRE(reusingCpuAllocatorCachedBytes() == 64 * kMiB);
+  CHECK(reusingCpuAllocatorCachedBytes() == 64 * kMiB);
   {
-    torch::Tensor big = floats(40 * kMiB);
-    CHECK(reusingCpuAllocatorCachedBytes() == 56 * kMiB);
+    torch::Tensor fits = floats(40 * kMiB);  // from the cache
+    const std::size_t left = reusingCpuAllocatorCachedBytes();
+    CHECK(left < 64 * kMiB - 40 * kMiB + 2 * kMiB);
+    // Fresh memory past the 12 blocks' mark: the cache goes back first.
+    torch::Tensor fresh = floats(100 * kMiB);
+    CHECK(reusingCpuAllocatorCachedBytes() == 0);
   }
-  CHECK(reusingCpuAllocatorCachedBytes() == 56 * kMiB);  // beyond the cap: not kept
+  CHECK(reusingCpuAllocatorCachedBytes() == 64 * kMiB);
 
   const std::size_t before = reusingCpuAllocatorCachedBytes();
   { torch::Tensor small = floats(kMiB / 2); }
@@ -54,33 +75,12 @@ TEST_CASE("a freed large block is reused for the same size, within the cap") {
   CHECK(reusingCpuAllocatorCachedBytes() == 0);
 }
 
-TEST_CASE("a freed block serves a request up to a quarter smaller, and returns whole") {
-  useReusingCpuAllocator(0);
-  useReusingCpuAllocator(64 * kMiB);
-  void* first = nullptr;
-  {
-    torch::Tensor t = floats(10 * kMiB);
-    first = t.data_ptr();
-  }
-  {
-    torch::Tensor smaller = floats(9 * kMiB);
-    CHECK(smaller.data_ptr() == first);
-    CHECK(reusingCpuAllocatorCachedBytes() == 0);
-  }
-  CHECK(reusingCpuAllocatorCachedBytes() == 10 * kMiB);  // back at its full size
-  {
-    torch::Tensor muchSmaller = floats(7 * kMiB);  // 10 > 1.25 x 7: a new block
-    CHECK(muchSmaller.data_ptr() != first);
-  }
-  useReusingCpuAllocator(0);
-}
-
 TEST_CASE("tensors through the allocator compute as usual") {
-  useReusingCpuAllocator(64 * kMiB);
+  emptyCache(64 * kMiB);
   for (int round = 0; round < 3; ++round) {  // the later rounds reuse the blocks
-    const torch::Tensor a = torch::arange(1 << 20, torch::kFloat);
+    const torch::Tensor a = torch::arange(1 << 22, torch::kFloat);
     const torch::Tensor b = a * 2 + 1;
     CHECK(b[12345].item<float>() == 2 * 12345 + 1);
-    CHECK(b.sum().item<double>() == doctest::Approx(double(1 << 20) * (1 << 20)).epsilon(1e-6));
+    CHECK(b.sum().item<double>() == doctest::Approx(double(1 << 22) * (1 << 22)).epsilon(1e-6));
   }
 }

@@ -1,10 +1,11 @@
-// LibTorch's CPU allocator with a cache of freed large blocks, reused by exact
-// size. A network's activations are hundreds of megabytes; glibc hands blocks
-// that large to the kernel (mmap) and back on every free, and the kernel zeroes
-// every page again on first touch: 12 s of system time of 60 s CPU on a 1080p
-// frame of the default, against 1.8 s for OIDN (docs/dndenoise.md#speed-and-memory).
-// The same shapes recur in every convolution of a level and in every network
-// run, so most large allocations find a block of their size.
+// LibTorch's CPU allocator with a cache of freed large blocks. A network's
+// activations are hundreds of megabytes; glibc hands blocks that large to the
+// kernel (mmap) and back on every free, and the kernel zeroes every page again
+// on first touch: 12 s of system time of 60 s CPU on a 1080p frame of the
+// default, against 1.8 s for OIDN (docs/dndenoise.md#speed-and-memory). Here
+// large blocks are carved from one reserved range of addresses, freed ones
+// merge with their free neighbours, and any later request that fits takes
+// them: memory zeroed once is zeroed once.
 #pragma once
 
 #include <cstddef>
@@ -13,11 +14,11 @@ namespace dn {
 
 // Installs the allocator for every later CPU tensor (process-wide; tensors
 // made before keep their own deleter). At most `maxCachedBytes` of freed
-// blocks are kept; a block freed beyond that goes back to the system. A new
-// block that would take the large blocks in use and cached past their
-// high-water mark evicts cached ones first: the peak memory stays what it is
-// without the cache. Blocks under 1 MiB are left to malloc. Calling it again
-// changes the cap.
+// memory is kept; past that the highest goes back to the system. A request
+// for fresh memory that would take the large blocks in use and cached past
+// their high-water mark gives cached memory back first: the peak stays what it
+// is without the cache. Blocks under 1 MiB are left to malloc. Calling it
+// again changes the cap.
 void useReusingCpuAllocator(std::size_t maxCachedBytes);
 
 // Bytes of freed blocks held for reuse now.
