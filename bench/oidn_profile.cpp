@@ -155,13 +155,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   torch::set_num_threads(threads);
-  c10::InferenceMode inference;
-  LoadedModel loaded = loadModelFile(model);
+  LoadedModel loaded = loadModelFile(model);  // outside inference mode, as the Denoiser loads it
   OidnBase base = loaded.oidnControlled ? loaded.oidnControlled->base() : loaded.oidn;
   base->eval();
   base->useChannelsLast();
   base->useBFloat16(bf16);
   const FrameBuffers buffers = readFrame(frame);
+  c10::InferenceMode inference;
   const double mpix = buffers.width * double(buffers.height) / 1e6;
   if (pipeline) {
     std::printf("%dx%d, the default's networks, %d threads%s\n", buffers.width, buffers.height,
