@@ -15,12 +15,12 @@
 #    (the median of 5, the agreement in dB, and one run each traced by Kineto,
 #    summed up in traces.txt), with TF32 off (the float agreement, >= 60 dB
 #    wanted), with cuDNN's benchmark mode, and in bfloat16;
-# 5. times 4K on CUDA in the default's tiles and in the fewest, and OIDN 2.5.1's own CUDA device
-#    (bench/gpu/oidn_bench.py, its usual call and its prefilter recipe) at both
-#    sizes where carry/oidn exists.
-# With bench/gpu/carry/build (prepare_carry.sh --build DIR: binaries built on the
-# development machine against the same PyTorch wheel) steps 1's configure and
-# build are skipped: minutes of GPU time saved.
+# 5. times 4K on CUDA in the default's tiles and in the fewest, and OIDN
+#    2.5.1's own CUDA device (bench/gpu/oidn_bench.py, its usual call and its
+#    prefilter recipe) at both sizes where carry/oidn exists.
+# With bench/gpu/carry/build (prepare_carry.sh --cuda-build DIR: binaries built
+# on the development machine against the same PyTorch wheel) step 1 is skipped:
+# minutes of GPU time saved.
 # Knobs: DN_GPU_REPEATS (5), DN_GPU_SIZES (1920x1080,3840x2160),
 # DN_GPU_MODES_LARGE (base,prefilter,split), DN_GPU_JOBS (nproc), DN_GPU_WORK (/tmp/dn-gpu),
 # DN_OIDN_LIB (bench/gpu/carry/oidn; e.g. a folder an earlier call left in /tmp).

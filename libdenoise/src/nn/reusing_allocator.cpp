@@ -1,6 +1,7 @@
 #include "dn/nn/reusing_allocator.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <map>
