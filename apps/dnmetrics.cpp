@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -16,6 +17,7 @@
 
 #include "common/app.h"
 #include "common/cli.h"
+#include "common/fvvdp.h"
 #include "common/progress.h"
 #include "common/sequence.h"
 #include "dn/flip.h"
@@ -56,6 +58,13 @@ options:
   --test-channels LIST   channel names to read from each TEST
                          (default: the colour of the file, or its Denoised layer if present)
   --nonfinite error|zero NaN/Inf pixels: fail (default) or count them as 0 and report
+  --fvvdp                also FovVideoVDP in JOD (higher is better, 10: no visible
+                         difference), through pyfvvdp in a Python subprocess,
+                         on the images as FLIP sees them; a sequence is scored
+                         as one video, in a row of its own
+  --fvvdp-python PATH    the interpreter that has pyfvvdp (default: $DN_FVVDP_PYTHON,
+                         else python3)
+  --fps N                a sequence's frame rate for --fvvdp (default: 24)
   --threads N            worker threads, 1-1024 (default: all cores)
   -v                     progress file by file on stderr
   --version              versions of the tool and its libraries
@@ -72,6 +81,9 @@ struct Options {
   std::vector<std::string> refChannels, testChannels;
   bool zeroNonFinite = false;
   bool verbose = false;
+  bool fvvdp = false;
+  cli::FvvdpSettings fvvdpSettings;
+  double fps = 24;
 };
 
 std::vector<std::string> channelList(const std::string& option, const std::string& text) {
@@ -84,6 +96,8 @@ std::vector<std::string> channelList(const std::string& option, const std::strin
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;
+  if (const char* python = std::getenv("DN_FVVDP_PYTHON"); python && *python)
+    o.fvvdpSettings.python = python;
   while (!args.done()) {
     if (args.flag("-h", "--help")) {
       std::fputs(kUsage, stdout);
@@ -121,6 +135,13 @@ Options parseArgs(int argc, char** argv) {
       std::string v = args.value("--nonfinite");
       if (v != "error" && v != "zero") throw cli::UsageError("--nonfinite must be error or zero");
       o.zeroNonFinite = v == "zero";
+    } else if (args.flag("--fvvdp")) {
+      o.fvvdp = true;
+    } else if (args.flag("--fvvdp-python")) {
+      o.fvvdpSettings.python = args.value("--fvvdp-python");
+    } else if (args.flag("--fps")) {
+      o.fps = cli::Args::toDouble("--fps", args.value("--fps"));
+      if (!(o.fps > 0)) throw cli::UsageError("--fps must be > 0");
     } else if (args.flag("--threads")) {
       kernelThreadCount() = args.intValue("--threads", 1, 1024);
     } else if (args.flag("-v", "--verbose")) {
@@ -176,6 +197,7 @@ Image loadChecked(const std::string& path, const std::vector<std::string>& chann
 struct Row {
   std::string name;
   std::map<std::string, double> values;
+  bool video = false;  // a sequence's FovVideoVDP as one video: no other metric
 };
 
 bool isImageFile(const fs::path& p) {
@@ -355,6 +377,12 @@ int run(const Options& o, int argc, char** argv) {
   std::string loadedRef;  // a shared reference is read once
   Image ref, previousRef, previousTest;
   const bool sequence = isSequence(o);
+  std::optional<cli::FvvdpScorer> fvvdp;
+  if (o.fvvdp) {
+    cli::FvvdpSettings settings = o.fvvdpSettings;
+    settings.fps = sequence ? o.fps : 0;
+    fvvdp.emplace(settings);
+  }
   std::optional<cli::Progress> progress;
   if (o.verbose) progress.emplace(stderr);
   for (const auto& [refPath, testPath, name] : pairs) {
@@ -371,6 +399,7 @@ int run(const Options& o, int argc, char** argv) {
       throw IoError(fmt::format("{}: size {}x{} does not match reference {} ({}x{})", testPath,
                                 test.width, test.height, refPath, ref.width, ref.height));
     auto comparison = metrics::compare(ref, test, o.metrics);
+    if (fvvdp) fvvdp->add(ref, test);
     if (!o.heatmap.empty()) writeHeatmap(o.heatmap, comparison);
     if (sequence) {
       if (!previousTest.empty() && !previousTest.sameShape(test))
@@ -384,11 +413,24 @@ int run(const Options& o, int argc, char** argv) {
   if (progress) progress->finish();
   Options shown = o;
   if (sequence) shown.metrics.push_back("flicker");
+  if (fvvdp) {
+    const std::vector<double> scores = fvvdp->score();
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      rows[i].values["fvvdp"] = sequence ? NAN : scores[i];
+    if (sequence) {
+      Row video{fmt::format("{} (video, {:g} fps)", o.inputs[1], o.fps), {}, true};
+      for (const auto& [metric, value] : rows.front().values) video.values[metric] = NAN;
+      video.values["fvvdp"] = scores.front();
+      rows.push_back(video);
+    }
+    shown.metrics.push_back("fvvdp");
+  }
   print(shown, rows);
 
   int status = cli::kExitOk;
   for (const auto& [metric, limit] : o.maxErrors)
     for (const auto& r : rows) {
+      if (r.video) continue;
       double v = r.values.at(metric);
       bool worse = metrics::higherIsBetter(metric) ? !(v >= limit) : !(v <= limit);
       if (worse) {

@@ -89,7 +89,62 @@ def main():
     out = run([tool, "--nonfinite", "zero", "--format", "json", p("ref.exr"), p("nan.exr")])
     check("--nonfinite zero counts and reports", out.returncode == 0 and "2 NaN/Inf" in out.stderr, out.stderr)
 
+    check_fvvdp(tool, p, ref, noisy)
     return summary()
+
+
+# Stands in for an interpreter with pyfvvdp: reads the frames dnmetrics wrote
+# and prints 10 - mean |test - ref| per pair, or over all frames for a video
+# (args: the scoring script, the folder, the display, the frame rate).
+FAKE_FVVDP = """#!/usr/bin/env python3
+import glob, os, sys
+import numpy as np
+folder, fps = sys.argv[2], float(sys.argv[4])
+tests = sorted(glob.glob(os.path.join(folder, "test_*.npy")))
+diffs = []
+for t in tests:
+    test, ref = np.load(t), np.load(t.replace("test_", "ref_"))
+    assert test.ndim == 3 and test.shape[2] == 3 and 0 <= test.min() and test.max() <= 1
+    diffs.append(np.abs(test - ref).mean())
+for d in ([np.mean(diffs)] if fps > 0 else diffs):
+    print(10 - d)
+"""
+
+
+def check_fvvdp(tool, p, ref, noisy):
+    """--fvvdp: the frames handed over as displayed, a row per pair or one for a
+    sequence's video, and a missing interpreter in one line; with
+    DN_FVVDP_PYTHON set, pyfvvdp itself."""
+    fake = p("fake_python")
+    with open(fake, "w") as f:
+        f.write(FAKE_FVVDP)
+    os.chmod(fake, 0o755)
+    out = run([tool, "--fvvdp", "--fvvdp-python", fake, "--format", "json", p("ref.exr"), p("same.exr"),
+               p("noisy.exr")])
+    doc = json.loads(out.stdout) if out.returncode == 0 else {"results": [{}, {}]}
+    check("--fvvdp: a score per pair", out.returncode == 0 and doc["results"][0].get("fvvdp") == 10
+          and 9 < doc["results"][1].get("fvvdp", 0) < 10, out.stdout + out.stderr)
+
+    for i, image in enumerate((ref, noisy, ref * 1.2), 1):
+        write_rgb(p(f"shot.{i:04d}.exr"), image)
+    out = run([tool, "--fvvdp", "--fvvdp-python", fake, "--fps", "12", "--format", "csv", "--metrics", "psnr",
+               p("ref.exr"), p("shot.#.exr")])
+    rows = out.stdout.strip().splitlines()
+    check("--fvvdp on a sequence: one video row at --fps", out.returncode == 0 and len(rows) == 6
+          and rows[4].startswith('"' + p("shot.#.exr") + ' (video, 12 fps)",nan,nan,9.'), out.stdout + out.stderr)
+
+    expect_error("--fvvdp without an interpreter",
+                 [tool, "--fvvdp", "--fvvdp-python", p("no_python"), p("ref.exr"), p("noisy.exr")], "--fvvdp")
+    python = os.environ.get("DN_FVVDP_PYTHON")
+    if not python:
+        print("skipped: pyfvvdp itself (set DN_FVVDP_PYTHON to an interpreter that has it)")
+        return
+    out = run([tool, "--fvvdp", "--fvvdp-python", python, "--format", "json", "--metrics", "psnr",
+               p("ref.exr"), p("same.exr"), p("noisy.exr")])
+    doc = json.loads(out.stdout) if out.returncode == 0 else {"results": [{}, {}]}
+    check("pyfvvdp: identical images 10 JOD, noisy ones fewer",
+          abs(doc["results"][0].get("fvvdp", 0) - 10) < 1e-3 and doc["results"][1].get("fvvdp", 10) < 9.9,
+          out.stdout + out.stderr)
 
 
 if __name__ == "__main__":
