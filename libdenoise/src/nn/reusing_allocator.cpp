@@ -15,6 +15,7 @@
 #include <c10/core/impl/alloc_cpu.h>
 
 #include <sys/mman.h>
+#include <sys/resource.h>
 
 namespace dn {
 namespace {
@@ -27,7 +28,15 @@ constexpr std::size_t kHeader = 64;
 // fault in 4 KiB at a time, which was a fifth of -q fast's CPU time.
 constexpr std::size_t kHugePage = std::size_t(2) << 20;
 // Addresses reserved for large blocks; only what is touched takes memory.
-constexpr std::size_t kArenaBytes = std::size_t(256) << 30;
+// Under a limit on the address space (ulimit -v, as some farms set) half of
+// it at most, so that the rest of the process keeps room.
+std::size_t arenaBytes() {
+  std::size_t bytes = std::size_t(256) << 30;
+  rlimit limit{};
+  if (getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+    bytes = std::min<std::size_t>(bytes, limit.rlim_cur / 2 / kHugePage * kHugePage);
+  return bytes;
+}
 
 std::size_t roundUp(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
 
@@ -84,19 +93,18 @@ class ReusingCpuAllocator final : public c10::Allocator {
   };
   using BySize = std::set<std::pair<std::size_t, std::size_t>>;  // (length, offset)
 
-  ReusingCpuAllocator() {
-    void* reserved = mmap(nullptr, kArenaBytes + kHugePage, PROT_READ | PROT_WRITE,
+  ReusingCpuAllocator() : size_(arenaBytes()) {
+    if (size_ == 0) return;
+    void* reserved = mmap(nullptr, size_ + kHugePage, PROT_READ | PROT_WRITE,
                           MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
     if (reserved == MAP_FAILED) return;
     base_ = reinterpret_cast<char*>(roundUp(reinterpret_cast<std::uintptr_t>(reserved), kHugePage));
 #ifdef MADV_HUGEPAGE
-    madvise(base_, kArenaBytes, MADV_HUGEPAGE);  // advice only: ignored where unsupported
+    madvise(base_, size_, MADV_HUGEPAGE);  // advice only: ignored where unsupported
 #endif
   }
 
-  bool inArena(const char* block) const {
-    return base_ && block >= base_ && block < base_ + kArenaBytes;
-  }
+  bool inArena(const char* block) const { return base_ && block >= base_ && block < base_ + size_; }
 
   void* take(std::size_t bytes) {
     char* block = nullptr;
@@ -133,7 +141,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
       offset = takeBestFit(idleBySize_, length);
     }
     if (!offset) {
-      if (top_ + length > kArenaBytes) return nullptr;
+      if (top_ + length > size_) return nullptr;
       offset = top_;
       top_ += length;
     }
@@ -208,6 +216,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
     while (cached_ > cap_) dropCached(cached_ - cap_);
   }
 
+  const std::size_t size_;             // of the reserved range
   char* base_ = nullptr;               // the reserved range, huge-page aligned; null if none
   std::size_t top_ = 0;                // offsets from here on were never handed out, or given back
   std::map<std::size_t, Range> free_;  // by offset
