@@ -1,9 +1,8 @@
 #!/usr/bin/env python3
-"""FovVideoVDP (pyfvvdp) of results against references, as still images or as one video.
+"""FovVideoVDP (pyfvvdp) of results against references, as still images, for
+the Makefile's pairs with a reference each (sequences: dnmetrics --fvvdp).
 
   fvvdp_score.py --display NAME --out OUT.json REF1 RES1 [REF2 RES2 ...]
-  fvvdp_score.py --video FPS ...  the pairs are the frames of one video, in order:
-      one score for the whole sequence, flicker included
       Both images go through the same display encoding dnmetrics uses for FLIP:
       Reinhard v / (1 + v) on linear radiance, then the sRGB curve; pyfvvdp then
       models an SDR display NAME (default standard_4k). Writes
@@ -31,7 +30,6 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--display", default="standard_4k")
     parser.add_argument("--out", required=True)
-    parser.add_argument("--video", type=float, default=0.0, help="FPS: score the pairs as one video")
     parser.add_argument("pairs", nargs="+")
     args = parser.parse_args()
     if len(args.pairs) % 2:
@@ -39,7 +37,7 @@ def main():
     import torch
     import pyfvvdp
     metric = pyfvvdp.fvvdp(display_name=args.display, heatmap=None, device=torch.device("cpu"))
-    pairs = []
+    results = []
     for ref_path, test_path in zip(args.pairs[::2], args.pairs[1::2]):
         try:
             ref, test = display_encode(read_color(ref_path)), display_encode(read_color(test_path))
@@ -47,18 +45,8 @@ def main():
             fail(f"fvvdp_score: {error}")
         if ref.shape != test.shape:
             fail(f"fvvdp_score: {test_path}: size {test.shape[:2]} differs from {ref_path} {ref.shape[:2]}")
-        pairs.append((ref_path, test_path, ref, test))
-    if args.video:
-        refs = torch.from_numpy(np.stack([p[2] for p in pairs]))
-        tests = torch.from_numpy(np.stack([p[3] for p in pairs]))
-        jod, _ = metric.predict(tests, refs, dim_order="FHWC", frames_per_second=args.video)
-        results = [{"reference": pairs[0][0], "file": pairs[0][1], "frames": len(pairs), "fps": args.video,
-                    "fvvdp": float(jod)}]
-    else:
-        results = []
-        for ref_path, test_path, ref, test in pairs:
-            jod, _ = metric.predict(torch.from_numpy(test), torch.from_numpy(ref), dim_order="HWC")
-            results.append({"reference": ref_path, "file": test_path, "fvvdp": float(jod)})
+        jod, _ = metric.predict(torch.from_numpy(test), torch.from_numpy(ref), dim_order="HWC")
+        results.append({"reference": ref_path, "file": test_path, "fvvdp": float(jod)})
     tmp = f"{args.out}.tmp{os.getpid()}"
     with open(tmp, "w") as f:
         json.dump({"display": args.display, "results": results}, f, indent=1)

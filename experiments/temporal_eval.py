@@ -19,8 +19,7 @@ each --spp, denoises the sequence these ways:
              what temporal_refilter gives, and its time against fbf's)
 and scores each with dnmetrics (PSNR, FLIP per frame, flicker of the error),
 and with FovVideoVDP as a 24 fps video where --fvvdp-python names an
-interpreter that has pyfvvdp (experiments/fvvdp_score.py --video; JOD, higher
-is better).
+interpreter that has pyfvvdp (dnmetrics --fvvdp; JOD, higher is better).
 Prints a Markdown table (means over frames; the worst per-frame PSNR change
 against fbf; wall time of the dndenoise runs) and writes OUT/results.json.
 Existing outputs are reused unless --force.
@@ -85,31 +84,19 @@ def denoise(args, scene, spp, method, out):
 
 
 def score(args, scene, spp, method, out):
+    """Per-frame PSNR, FLIP and flicker, and with --fvvdp-python the frames'
+    FovVideoVDP as one 24 fps video (None without)."""
     folder = os.path.join(args.data, scene)
     shared = os.path.join(folder, "ref.exr")
     ref = shared if os.path.exists(shared) else os.path.join(folder, "ref.#.exr")
     test = os.path.join(out, method, f"spp{spp}.#.exr")
-    _, stdout = run([args.dnmetrics, ref, test, "--metrics", "psnr,flip", "--format", "json"])
-    data = json.loads(stdout)
-    return {"psnr": [r["psnr"] for r in data["results"]], "flip": [r["flip"] for r in data["results"]],
-            "flicker": [r["flicker"] for r in data["results"][1:]]}
-
-
-def fvvdp(args, scene, spp, method, out):
-    """FovVideoVDP of the method's frames as one 24 fps video, or None without pyfvvdp."""
-    if not args.fvvdp_python:
-        return None
-    folder = os.path.join(args.data, scene)
-    shared = os.path.join(folder, "ref.exr")
-    pairs = []
-    for frame in frames_of(folder, spp):
-        number = frame[-8:-4]
-        pairs += [shared if os.path.exists(shared) else os.path.join(folder, f"ref.{number}.exr"),
-                  os.path.join(out, method, f"spp{spp}.{number}.exr")]
-    target = os.path.join(out, method + ".fvvdp.json")
-    run([args.fvvdp_python, os.path.join(HERE, "fvvdp_score.py"), "--video", "24", "--out", target] + pairs)
-    with open(target) as f:
-        return json.load(f)["results"][0]["fvvdp"]
+    cmd = [args.dnmetrics, ref, test, "--metrics", "psnr,flip", "--format", "json"]
+    if args.fvvdp_python:
+        cmd += ["--fvvdp", "--fvvdp-python", args.fvvdp_python, "--fps", "24"]
+    rows = json.loads(run(cmd)[1])["results"]
+    video = rows.pop()["fvvdp"] if args.fvvdp_python else None  # the sequence's own row, last
+    return {"psnr": [r["psnr"] for r in rows], "flip": [r["flip"] for r in rows],
+            "flicker": [r["flicker"] for r in rows[1:]], "fvvdp": video}
 
 
 def history_shares(log):
@@ -151,8 +138,6 @@ def main():
             methods = list(METHODS) + args.extra
             times = {m: denoise(args, scene, spp, m, out) for m in methods}
             scores = {m: score(args, scene, spp, m, out) for m in methods}
-            for m in methods:
-                scores[m]["fvvdp"] = fvvdp(args, scene, spp, m, out)
             worst = {m: min(t - f for t, f in zip(scores[m]["psnr"], scores["fbf"]["psnr"])) for m in methods}
             shares = {m: history_shares(os.path.join(out, m + ".log")) for m in methods
                       if m not in ("fbf", "oidn", "prefilter")}
