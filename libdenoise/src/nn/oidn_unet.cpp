@@ -170,15 +170,18 @@ torch::Tensor OidnUNetImpl::upConv(const std::string& name, const torch::Tensor&
       skipInFloat
           ? torch::conv2d(skip, c->weight.narrow(1, ch, skip.size(1)), c->bias, 1, 1)
           : torch::conv2d(skip.to(type), p.weight.narrow(1, ch, skip.size(1)), p.bias, 1, 1);
-  // The upsampled share: every phase from the coarse input, padded by one so
-  // that phase (py, px) is the window starting at (py, px).
-  const torch::Tensor phases = torch::conv2d(
-      coarse.to(type), foldUpsampling(p.weight.narrow(1, 0, ch)).contiguous(format), {}, 1, 1);
+  // The upsampled share: each phase from the coarse input, padded by one so
+  // that phase (py, px) is the window starting at (py, px). One phase at a
+  // time: at full resolution the four at once were the network's peak memory.
+  const torch::Tensor folded = foldUpsampling(p.weight.narrow(1, 0, ch)).contiguous(format);
+  const torch::Tensor input = coarse.to(type);
   const torch::Tensor fine = out.view({batch, outCh, h, 2, w, 2});
   for (int64_t py = 0; py < 2; ++py)
-    for (int64_t px = 0; px < 2; ++px)
-      fine.select(3, py).select(4, px).add_(
-          phases.narrow(1, (2 * py + px) * outCh, outCh).narrow(2, py, h).narrow(3, px, w));
+    for (int64_t px = 0; px < 2; ++px) {
+      const torch::Tensor phase =
+          torch::conv2d(input, folded.narrow(0, (2 * py + px) * outCh, outCh), {}, 1, 1);
+      fine.select(3, py).select(4, px).add_(phase.narrow(2, py, h).narrow(3, px, w));
+    }
   return out.relu_();
 }
 
