@@ -1,8 +1,8 @@
 // The CPU allocator that keeps freed large blocks for reuse: a freed block
 // comes back for its size or serves smaller ones, pieces merge again when
-// freed, the cache stays within its cap and under the high-water mark of the
-// memory in use, small blocks are left to malloc, and tensors made through it
-// hold their values.
+// freed, a larger request grows the cached range at the top, the cache stays
+// within its cap and under the high-water mark of the memory in use, small
+// blocks are left to malloc, and tensors made through it hold their values.
 #include "doctest_torch.h"
 
 #include "dn/nn/reusing_allocator.h"
@@ -73,6 +73,23 @@ TEST_CASE("the cache stays within its cap and under the high-water mark") {
 
   useReusingCpuAllocator(0);  // a lower cap frees what it holds
   CHECK(reusingCpuAllocatorCachedBytes() == 0);
+}
+
+TEST_CASE("a request larger than every cached range grows the one at the top") {
+  emptyCache(64 * kMiB);
+  const char* first = nullptr;
+  {
+    torch::Tensor t = floats(8 * kMiB);
+    t.fill_(7.0f);
+    first = address(t);
+  }
+  CHECK(reusingCpuAllocatorCachedBytes() >= 8 * kMiB);
+  torch::Tensor grown = floats(20 * kMiB);  // the cached 8 MiB, then fresh memory above it
+  CHECK(address(grown) == first);
+  CHECK(reusingCpuAllocatorCachedBytes() == 0);
+  // Kept in memory, not given back and zeroed again: the old values are there.
+  CHECK(grown[0].item<float>() == 7.0f);
+  CHECK(grown[int64_t(8 * kMiB / sizeof(float)) - 1].item<float>() == 7.0f);
 }
 
 TEST_CASE("tensors through the allocator compute as usual") {

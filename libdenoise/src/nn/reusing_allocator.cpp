@@ -54,8 +54,11 @@ void* allocHuge(std::size_t bytes) {
 // peak. Free ranges still in memory are "cached"; past the cap, or where a
 // request for fresh memory would take the memory in use and cached past its
 // high-water mark, the highest go back to the kernel (MADV_DONTNEED) and
-// become "idle". Where the range cannot be reserved, large blocks come from
-// aligned_alloc and go back on free.
+// become "idle". A request that no cached range holds first grows the cached
+// range at the top, if there is one: with the decoder's phases run one at a
+// time (oidn_unet.cpp) the high-water mark is lower, and giving back and
+// zeroing again otherwise doubled the fresh pages of a 4K frame. Where the range cannot be
+// reserved, large blocks come from aligned_alloc and go back on free.
 class ReusingCpuAllocator final : public c10::Allocator {
  public:
   // LibTorch 1.13 declares allocate const; 2.3 and later declare it non-const
@@ -134,6 +137,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
   // A block of `length` (whole huge pages) from the arena, or null when it is full.
   char* carveArena(std::size_t length) {
     std::optional<std::size_t> offset = takeBestFit(cachedBySize_, length);
+    if (!offset) offset = extendTopRange(length);
     if (!offset) {
       // Fresh memory: the cache makes room first (the peak stays the one without it).
       while (live_ + cached_ + length > highWater_ && cached_ > 0)
@@ -150,6 +154,19 @@ class ReusingCpuAllocator final : public c10::Allocator {
     char* block = base_ + *offset;
     *reinterpret_cast<std::size_t*>(block) = length;
     return block;
+  }
+
+  // The cached range that ends at the top, grown by fresh memory above it to
+  // `length`: only the growth is zeroed, where a fresh block would be whole.
+  std::optional<std::size_t> extendTopRange(std::size_t length) {
+    if (free_.empty()) return std::nullopt;
+    const auto& [offset, range] = *free_.rbegin();
+    if (!range.cached || offset + range.length != top_ || offset + length > size_)
+      return std::nullopt;
+    const std::size_t start = offset;
+    removeFree(start);
+    top_ = start + length;
+    return start;
   }
 
   // Takes `length` from the start of the smallest range in `bySize` that holds it.

@@ -15,10 +15,11 @@ namespace dn {
 // Installs the allocator for every later CPU tensor (process-wide; tensors
 // made before keep their own deleter). At most `maxCachedBytes` of freed
 // memory is kept; past that the highest goes back to the system. A request
-// for fresh memory that would take the large blocks in use and cached past
-// their high-water mark gives cached memory back first: the peak stays what it
-// is without the cache. Blocks under 1 MiB are left to malloc. Calling it
-// again changes the cap.
+// that no cached range holds grows the cached range at the top of the arena,
+// where there is one, so that only the growth is fresh; else it gives cached
+// memory back first where fresh memory would take the large blocks in use and
+// cached past their high-water mark. Blocks under 1 MiB are left to malloc.
+// Calling it again changes the cap.
 void useReusingCpuAllocator(std::size_t maxCachedBytes);
 
 // Bytes of freed blocks held for reuse now.
