@@ -113,22 +113,35 @@ torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, floa
   return input;
 }
 
+namespace {
+
+// The region of a buffer on `device`, (3, h, w): from `onDevice` where it is
+// there, else the region's pixels as stored (3 channels, or 1 broadcast),
+// moved as they are.
+torch::Tensor regionOnDevice(const FrameBuffers& frame, const std::string& name, const TileRect& r,
+                             torch::Device device, const DeviceBuffers& onDevice) {
+  if (auto it = onDevice.find(name); it != onDevice.end())
+    return it->second.narrow(1, r.y0, r.height).narrow(2, r.x0, r.width);
+  const Image& image = frame.get(name);
+  return torch::from_blob(const_cast<float*>(image.pixels.data()),
+                          {image.height, image.width, image.channels})
+      .narrow(0, r.y0, r.height)
+      .narrow(1, r.x0, r.width)
+      .narrow(2, 0, image.channels >= 3 ? 3 : 1)
+      .to(device)
+      .permute({2, 0, 1})
+      .expand({3, r.height, r.width});
+}
+
+}  // namespace
+
 torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
-                                const TileRect& r, torch::Device device) {
+                                const TileRect& r, torch::Device device,
+                                const DeviceBuffers& onDevice) {
   std::vector<torch::Tensor> planes;
   for (size_t b = 0; b < set.buffers.size(); ++b) {
     const std::string& name = set.buffers[b];
-    const Image& image = frame.get(name);
-    // The region's pixels as stored (3 channels, or 1 broadcast), moved as they are.
-    torch::Tensor v = torch::from_blob(const_cast<float*>(image.pixels.data()),
-                                       {image.height, image.width, image.channels})
-                          .narrow(0, r.y0, r.height)
-                          .narrow(1, r.x0, r.width)
-                          .narrow(2, 0, image.channels >= 3 ? 3 : 1)
-                          .to(device)
-                          .permute({2, 0, 1})
-                          .expand({3, r.height, r.width});
-    v = nanToZero(v);
+    torch::Tensor v = nanToZero(regionOnDevice(frame, name, r, device, onDevice));
     if (name == "color")
       v = puEncodeOnDevice((v * exposure).clamp(0.0f, std::numeric_limits<float>::max()));
     else if (name == "albedo" && b == 0)
@@ -210,8 +223,9 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
     torch::Tensor x;
     {
       RECORD_FUNCTION("dn::oidnInput", std::vector<c10::IValue>());
-      x = onHost ? oidnInput(frame, set, result.exposure, r)
-                 : oidnInputOnDevice(frame, set, result.exposure, r, options.device);
+      x = onHost
+              ? oidnInput(frame, set, result.exposure, r)
+              : oidnInputOnDevice(frame, set, result.exposure, r, options.device, options.onDevice);
       const int64_t padH = (kOidnAlignment - r.height % kOidnAlignment) % kOidnAlignment;
       const int64_t padW = (kOidnAlignment - r.width % kOidnAlignment) % kOidnAlignment;
       x = torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0)

@@ -20,12 +20,18 @@ bool contains(const std::vector<std::string>& names, const std::string& name) {
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
-// The frame's albedo or normal (setName "alb" or "nrm") denoised by the base's own network.
-Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& frame,
-                 const OidnRunOptions& options) {
+// The frame's albedo or normal (setName "alb" or "nrm") denoised by the
+// base's own network, (1, 3, H, W) on the run's device.
+torch::Tensor cleanedAuxTensor(const OidnBase& base, const char* setName, const FrameBuffers& frame,
+                               const OidnRunOptions& options) {
   OidnUNet net = base->net(setName);
   net->to(options.device);
-  return tensorToImage(runOidn(net, oidnInputSet(setName), frame, options).image);
+  return runOidn(net, oidnInputSet(setName), frame, options).image;
+}
+
+Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& frame,
+                 const OidnRunOptions& options) {
+  return tensorToImage(cleanedAuxTensor(base, setName, frame, options));
 }
 
 // The caller's exposure, checked against OIDN's autoexposure of the frame; 0 stays automatic.
@@ -72,10 +78,18 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
     return o;
   };
   const OidnRunOptions albedoRun = next(), normalRun = next();  // in this order: progress
-  const FrameBuffers clean = withCleanAux(base, frame, albedoRun, normalRun);
   const OidnInputSet& set = oidnInputSet("hdr_calb_cnrm_large");
   OidnUNet net = base->net(set.name);
   net->to(options.device);
+  if (!options.device.is_cpu() && !splitLightPaths) {
+    // On a GPU the cleaned albedo and normal stay there for the colour
+    // network: the same values, without the copies down to the host and up.
+    OidnRunOptions colourRun = next();
+    colourRun.onDevice["albedo"] = cleanedAuxTensor(base, "alb", frame, albedoRun).squeeze(0);
+    colourRun.onDevice["normal"] = cleanedAuxTensor(base, "nrm", frame, normalRun).squeeze(0);
+    return runOidn(net, set, frame, colourRun);
+  }
+  const FrameBuffers clean = withCleanAux(base, frame, albedoRun, normalRun);
   OidnRunResult whole = runOidn(net, set, clean, next());
   if (!splitLightPaths) return whole;
 

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -31,11 +32,16 @@ constexpr int64_t kOidnMaxTilePixels = 2160 * 2160;
 // colour multiplied by `exposure`, on the CPU.
 torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
                         const TileRect& region);
+// Buffers already on the run's device, by name: (3, H, W) over the whole
+// frame in the frame's units, taken instead of the frame's images.
+using DeviceBuffers = std::map<std::string, torch::Tensor>;
 // The same made on `device` with tensor operations from the buffers as
-// stored: what crosses to a GPU is the region's raw pixels. Agrees with
-// oidnInput to float rounding of the curves (test_oidn_base).
+// stored: what crosses to a GPU is the region's raw pixels, or nothing for
+// the buffers in `onDevice`. Agrees with oidnInput to float rounding of the
+// curves (test_oidn_base).
 torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
-                                const TileRect& region, torch::Device device);
+                                const TileRect& region, torch::Device device,
+                                const DeviceBuffers& onDevice = {});
 // Network output (1, 3, h, w) -> the set's denoised buffer in the frame's
 // units: linear HDR radiance, albedo in [0, 1] or normals in [-1, 1]. A CPU
 // output is decoded on the CPU, any other where it is
@@ -54,6 +60,8 @@ struct OidnRunOptions {
   // Replaces `net` on each tile: the padded input (1, C, h, w) and the tile's
   // region of the frame -> the network's output of the same size.
   std::function<torch::Tensor(const torch::Tensor&, const TileRect&)> network;
+  // Off the CPU: inputs a previous network left on the device (oidnInputOnDevice).
+  DeviceBuffers onDevice;
 };
 
 struct OidnRunResult {
