@@ -13,6 +13,9 @@ Scenes (all small, deterministic, built here):
   orbit      the camera circling the room while a ball rolls across the floor (camera and
              object motion together; added after the filter's thresholds were set, as a
              held-out design)
+  dolly      the camera pushing in and turning while a box slides diagonally across the floor
+             (scale change, parallax and object motion; added in session 21 as a second
+             held-out design, after the filter's session-21 changes were chosen)
   convention a camera looking straight down at a textured plane, moving a known number of
              pixels per frame: (+3, +2) px from frame 1 to 2 and (+6, +4) px from 2 to 3
              (x right, y up, in the camera's view), to establish the Vector pass's
@@ -44,12 +47,15 @@ def script_argv():
 
 def parse_args():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scene", choices=("pan", "still", "object", "light", "orbit", "convention"), required=True)
+    p.add_argument("--scene", choices=("pan", "still", "object", "light", "orbit", "dolly", "convention"), required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--res", default="160x120", help="WIDTHxHEIGHT")
     p.add_argument("--frames", default="1-8", help="FIRST-LAST")
     p.add_argument("--spp", type=int, nargs="*", default=[4, 16])
     p.add_argument("--ref-spp", type=int, default=1024, help="0: no reference")
+    p.add_argument("--ref-seed", type=int, default=7919,
+                   help="the reference's noise seed (another seed renders an independent reference)")
+    p.add_argument("--ref-name", default="ref", help="the reference files' name: NAME.####.exr")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--half", action="store_true", help="half-float channels (default: float)")
     p.add_argument("--fixed-seed", action="store_true", help="same noise seed in every frame (Blender's default)")
@@ -200,6 +206,14 @@ def build_room(scene, args):
                         material("roller", (0.8, 0.35, 0.1), 0.3, checker=4))
         drive(ball, "location", 0, "-2.5 + 0.3 * frame")
         drive(ball, "rotation_euler", 1, "0.6 * frame")
+    elif args.scene == "dolly":  # pushing in about 0.12 m a frame, turning left, a box sliding
+        drive(cam, "location", 0, "0.5 + 0.04 * frame")
+        drive(cam, "location", 1, "-6.5 + 0.12 * frame")
+        drive(cam, "rotation_euler", 2, "0.006 * frame")
+        box = add_mesh("cube", "mover", (-1.5, -0.5, 0.45), (0.35, 0.35, 0.45),
+                       material("mover", (0.6, 0.15, 0.5), 0.4, checker=3))
+        drive(box, "location", 0, "-1.8 + 0.2 * frame")
+        drive(box, "location", 1, "-0.8 + 0.1 * frame")
 
 
 def build_convention(scene, args):
@@ -257,8 +271,8 @@ def main():
         for spp in args.spp:
             render(scene, os.path.join(args.out, "spp%d.%04d.exr" % (spp, frame)), spp, 1000 * spp)
         if args.ref_spp > 0 and (args.scene != "still" or frame == first):
-            name = "ref.exr" if args.scene == "still" else "ref.%04d.exr" % frame
-            render(scene, os.path.join(args.out, name), args.ref_spp, 7919)
+            name = args.ref_name + (".exr" if args.scene == "still" else ".%04d.exr" % frame)
+            render(scene, os.path.join(args.out, name), args.ref_spp, args.ref_seed)
 
 
 if __name__ == "__main__":

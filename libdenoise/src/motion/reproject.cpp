@@ -1,5 +1,7 @@
 #include "dn/motion/reproject.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -20,28 +22,94 @@ int nearest(float v, int size) {
 }
 
 // Whether pixel `s` of the source and pixel `c` of the current frame see the
-// same surface, by every guide both frames have.
+// same surface by depth, by normal, by albedo.
+bool sameDepth(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+               const TrustOptions& o) {
+  const float zs = source.depth.pixels[s], zc = current.depth.pixels[c];
+  return std::abs(zs - zc) <= o.depthRelative * std::max(std::abs(zc), 1e-6f);
+}
+
+bool sameNormal(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+                const TrustOptions& o) {
+  const float* ns = &source.normal.pixels[3 * s];
+  const float* nc = &current.normal.pixels[3 * c];
+  const double ls = std::sqrt(ns[0] * ns[0] + ns[1] * ns[1] + ns[2] * ns[2]);
+  const double lc = std::sqrt(nc[0] * nc[0] + nc[1] * nc[1] + nc[2] * nc[2]);
+  if ((ls < 1e-3) != (lc < 1e-3)) return false;  // surface against background
+  return ls < 1e-3 || (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]) >= o.normalCosine * ls * lc;
+}
+
+bool sameAlbedo(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+                const TrustOptions& o) {
+  for (int ch = 0; ch < 3; ++ch) {
+    const float as = source.albedo.pixels[3 * s + ch], ac = current.albedo.pixels[3 * c + ch];
+    if (std::abs(as - ac) > o.albedoAbsolute + o.albedoRelative * std::max(as, ac)) return false;
+  }
+  return true;
+}
+
+using GuideTest = bool (*)(const Guides&, std::size_t, const Guides&, std::size_t,
+                           const TrustOptions&);
+
+// A guide test passed at the current pixel or at a pixel within
+// `neighbourhood` of it. An edge pixel's guides blend two surfaces by a coverage that
+// every frame's anti-aliasing samples change, so the tap is compared with each
+// surface seen around it, not with this frame's blend alone.
+bool matchesAround(GuideTest test, const Guides& source, std::size_t s, const Guides& current,
+                   std::size_t c, int width, int height, const TrustOptions& o) {
+  if (test(source, s, current, c, o)) return true;
+  const int r = o.neighbourhood, cx = static_cast<int>(c % width), cy = static_cast<int>(c / width);
+  for (int y = std::max(0, cy - r); y <= std::min(height - 1, cy + r); ++y)
+    for (int x = std::max(0, cx - r); x <= std::min(width - 1, cx + r); ++x)
+      if (test(source, s, current, static_cast<std::size_t>(y) * width + x, o)) return true;
+  return false;
+}
+
+// Whether source pixel `s` shows a surface seen at or around current pixel
+// `c`, by every guide both frames have (albedo only when `byAlbedo`).
 bool sameSurface(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
-                 const TrustOptions& o) {
-  if (!source.depth.empty() && !current.depth.empty()) {
-    const float zs = source.depth.pixels[s], zc = current.depth.pixels[c];
-    if (std::abs(zs - zc) > o.depthRelative * std::max(std::abs(zc), 1e-6f)) return false;
-  }
-  if (!source.normal.empty() && !current.normal.empty()) {
-    const float* ns = &source.normal.pixels[3 * s];
-    const float* nc = &current.normal.pixels[3 * c];
-    const double ls = std::sqrt(ns[0] * ns[0] + ns[1] * ns[1] + ns[2] * ns[2]);
-    const double lc = std::sqrt(nc[0] * nc[0] + nc[1] * nc[1] + nc[2] * nc[2]);
-    if ((ls < 1e-3) != (lc < 1e-3)) return false;  // surface against background
-    if (ls >= 1e-3 && (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]) < o.normalCosine * ls * lc)
-      return false;
-  }
-  if (!source.albedo.empty() && !current.albedo.empty()) {
-    for (int ch = 0; ch < 3; ++ch) {
-      const float as = source.albedo.pixels[3 * s + ch], ac = current.albedo.pixels[3 * c + ch];
-      if (std::abs(as - ac) > o.albedoAbsolute + o.albedoRelative * std::max(as, ac)) return false;
+                 int width, int height, const TrustOptions& o, bool byAlbedo = true) {
+  auto has = [](const Image& a, const Image& b) { return !a.empty() && !b.empty(); };
+  if (has(source.depth, current.depth) &&
+      !matchesAround(sameDepth, source, s, current, c, width, height, o))
+    return false;
+  if (has(source.normal, current.normal) &&
+      !matchesAround(sameNormal, source, s, current, c, width, height, o))
+    return false;
+  return !byAlbedo || !has(source.albedo, current.albedo) ||
+         matchesAround(sameAlbedo, source, s, current, c, width, height, o);
+}
+
+// Catmull-Rom's weights of the taps at offsets -1, 0, 1, 2 from floor(q).
+std::array<double, 4> catmullRom(double t) {
+  const double t2 = t * t, t3 = t2 * t;
+  return {0.5 * (-t3 + 2 * t2 - t), 0.5 * (3 * t3 - 5 * t2 + 2), 0.5 * (-3 * t3 + 4 * t2 + t),
+          0.5 * (t3 - t2)};
+}
+
+// The source resampled at (qx, qy) by Catmull-Rom into `out`, where all 16
+// taps lie on the screen and show the destination's surface by depth and
+// normal (a texture's edges within one surface are what it keeps sharp);
+// false, with `out` untouched, where not, or where a value would be negative.
+bool cubicSample(const Image& source, const Guides& sourceGuides, float qx, float qy,
+                 const Guides& currentGuides, std::size_t here, const TrustOptions& options,
+                 float* out) {
+  const int width = source.width, height = source.height, channels = source.channels;
+  const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
+  if (x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
+  const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
+  std::array<double, 4> sum = {0, 0, 0, 0};
+  for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i) {
+      const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
+      if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options, false))
+        return false;
+      for (int c = 0; c < channels && c < 4; ++c)
+        sum[c] += wx[i] * wy[j] * source.pixels[tap * channels + c];
     }
-  }
+  for (int c = 0; c < channels && c < 4; ++c)
+    if (sum[c] < 0.0) return false;
+  for (int c = 0; c < channels && c < 4; ++c) out[c] = static_cast<float>(sum[c]);
   return true;
 }
 
@@ -111,19 +179,21 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
       std::fill(sum.begin(), sum.end(), 0.0);
       for (int t = 0; t < 4; ++t) {
         const int tx = x0 + (t & 1), ty = y0 + (t >> 1);
-        const double bilinear = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-        const bool closest =
-            tx == static_cast<int>(std::lround(qx)) && ty == static_cast<int>(std::lround(qy));
-        const double w = options.nearest ? (closest ? 1.0 : 0.0) : bilinear;
+        const double w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
         if (w <= 0.0 || tx < 0 || ty < 0 || tx >= width || ty >= height) continue;
         const std::size_t tap = static_cast<std::size_t>(ty) * width + tx;
-        if (!sameSurface(sourceGuides, tap, currentGuides, here, options)) continue;
+        if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options)) continue;
         accepted += w;
         for (int c = 0; c < channels; ++c) sum[c] += w * source.pixels[tap * channels + c];
       }
       if (accepted < options.minCoverage) continue;
-      for (int c = 0; c < channels; ++c)
-        out.image.pixels[here * channels + c] = static_cast<float>(sum[c] / accepted);
+      float* value = &out.image.pixels[here * channels];
+      // Where every bilinear tap matched, the sharper cubic where it can.
+      const bool cubic =
+          options.cubic && channels <= 4 && accepted > 0.999 &&
+          cubicSample(source, sourceGuides, qx, qy, currentGuides, here, options, value);
+      if (!cubic)
+        for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
       out.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));
     }
   return out;

@@ -176,11 +176,13 @@ Centre centreOf(const WindowFrame& frame) {
 }
 
 // One neighbour's result brought into the centre frame, with a weight per
-// pixel; or why it was left out whole.
+// pixel from the surface and light tests (the colour test comes later, once
+// every neighbour is in); or why it was left out whole.
 struct Contribution {
   enum class Verdict { Used, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
   Image image;
   std::vector<double> weight;
+  double spread = 0.0;  // of its differences from the frame's result, in local noise levels
 };
 
 // `chain`: the centre's geometry, then each frame's up to the neighbour.
@@ -210,25 +212,53 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     out.verdict = Contribution::Verdict::ChangedLight;
     return out;
   }
-  const double spread = std::min(fullSpread, options.maxSpread);
+  out.spread = std::min(fullSpread, options.maxSpread);
   const std::vector<float> changed =
       lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions),
                   moved.trust, centre.residual, residual, options.lightBox);
   out.weight.assign(d.size(), 0.0);
-  for (std::size_t i = 0; i < d.size(); ++i) {
-    double w = moved.trust.pixels[i];
-    if (w <= 0.0) continue;
-    if (spread > 0.0) {
-      const double z = d[i] / spread;
-      w *=
-          std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0, 1.0);
-    }
-    w *= std::clamp((options.lightHigh - changed[i]) / (options.lightHigh - options.lightLow), 0.0,
-                    1.0);
-    out.weight[i] = w;
-  }
+  for (std::size_t i = 0; i < d.size(); ++i)
+    out.weight[i] = moved.trust.pixels[i] * std::clamp((options.lightHigh - changed[i]) /
+                                                           (options.lightHigh - options.lightLow),
+                                                       0.0, 1.0);
   out.image = std::move(moved.image);
   return out;
+}
+
+// What the colour test compares each neighbour with: the frame's result
+// blended with the mean of the frame and every neighbour the other tests kept.
+Image colourReference(const Image& own, const std::vector<Contribution>& contributions,
+                      double blend) {
+  std::vector<double> sum(own.pixels.begin(), own.pixels.end());
+  std::vector<double> weight(own.pixelCount(), 1.0);
+  for (const Contribution& k : contributions)
+    for (std::size_t i = 0; i < k.weight.size(); ++i) {
+      if (k.weight[i] <= 0.0) continue;
+      weight[i] += k.weight[i];
+      for (int ch = 0; ch < 3; ++ch) sum[3 * i + ch] += k.weight[i] * k.image.pixels[3 * i + ch];
+    }
+  Image out = own;
+  for (std::size_t i = 0; i < weight.size(); ++i)
+    for (int ch = 0; ch < 3; ++ch)
+      out.pixels[3 * i + ch] = static_cast<float>((1.0 - blend) * own.pixels[3 * i + ch] +
+                                                  blend * sum[3 * i + ch] / weight[i]);
+  return out;
+}
+
+// The colour test: a neighbour's weight falls where its result differs from
+// the reference by more than its differences' spread allows (a moving
+// highlight, a reflection, a misaligned edge).
+void applyColourTest(Contribution& k, const Image& referenceMapped, const Centre& centre,
+                     const TemporalOptions& options) {
+  if (k.spread <= 0.0) return;
+  const std::vector<float> d =
+      absoluteDifference(tonemapped(k.image, centre.scale), referenceMapped);
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    if (k.weight[i] <= 0.0) continue;
+    const double z = d[i] / centre.noise[i] / k.spread;
+    k.weight[i] *=
+        std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0, 1.0);
+  }
 }
 
 // Runs task(0 .. count-1) on up to `threads` threads; the first exception
@@ -285,6 +315,10 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     const Neighbour& nb = neighbours[n];
     contributions[n] = contributionOf(c, *nb.frame, nb.chain, nb.forward, options);
   });
+  const Image referenceMapped = tonemapped(
+      colourReference(current.denoised, contributions, options.colourReference), c.scale);
+  forEach(contributions.size(), options.threads,
+          [&](std::size_t n) { applyColourTest(contributions[n], referenceMapped, c, options); });
 
   // Summed in the neighbours' order, so the result does not depend on threads.
   const Image& base = current.denoised;

@@ -25,9 +25,14 @@ struct TrustOptions {
   double albedoRelative = 0.25;
   double roundTripPixels = 1.0;  // the neighbour's motion back must land within this
   double minCoverage = 0.5;      // least bilinear weight of the accepted taps
-  // The nearest pixel only (trust 0 or 1): noisy samples keep their noise
-  // independent, which a bilinear blend would correlate.
-  bool nearest = false;
+  // A tap passes each guide's test if it passes it at the destination or at a
+  // pixel within this many pixels of it: anti-aliased edges blend two surfaces
+  // by a coverage that changes with every frame's samples.
+  int neighbourhood = 1;
+  // Catmull-Rom over 4x4 taps where all show the destination's surface (by
+  // depth and normal), else bilinear: bilinear resampling blurs texture edges
+  // by up to a quarter of their contrast at half-pixel offsets.
+  bool cubic = true;
 };
 
 // One frame as reprojection sees it: its guides and its motion.
@@ -45,7 +50,8 @@ Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
                      const TrustOptions& options = {});
 
 // A neighbour's image resampled at `positions` (bilinear over the taps whose
-// guides match the current frame's at the destination pixel), and the trust of
+// guides match the current frame's around the destination pixel; Catmull-Rom
+// where all 16 of its taps do and `cubic`), and the trust of
 // each pixel in [0, 1]: 0 off-screen, disoccluded, or another surface; else
 // the share of bilinear weight that matched (below minCoverage: 0).
 struct Reprojected {

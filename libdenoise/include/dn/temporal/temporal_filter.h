@@ -25,12 +25,17 @@ struct WindowFrame {
 struct TemporalOptions {
   int radius = 4;  // neighbours on each side
   motion::TrustOptions trust;
-  // A neighbour whose reprojected result differs from the frame's (in a
+  // A neighbour whose reprojected result differs from the reference (in a
   // Reinhard space, relative to the render's local noise level) by more than
   // this many robust spreads of such differences is a moving shadow or
   // highlight: its weight falls linearly to 0 between colourLow and colourHigh.
   double colourLow = 2.5;
   double colourHigh = 5.0;
+  // What the colour test compares with: the frame's own result (0), the mean
+  // of it and every neighbour the surface and light tests kept (1), or a
+  // blend. Against its own result alone, a frame rejects its neighbours just
+  // where its leftover error is largest, which they would have averaged out.
+  double colourReference = 0.75;
   // The spread is at most this: on the locked-off and moving-camera shots of
   // experiments/render_sequences.py it is 0.16-0.20 at 4 spp and 0.21-0.26 at
   // 16 spp; a lamp moving across the room raises it to 1-7.
