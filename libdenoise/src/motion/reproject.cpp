@@ -188,9 +188,11 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
       }
       if (accepted < options.minCoverage) continue;
       float* value = &out.image.pixels[here * channels];
-      // Where every bilinear tap matched, the sharper cubic where it can.
+      // Where every bilinear tap matched, the sharper cubic where it can (at a
+      // whole-pixel offset both are the tap itself).
+      const bool whole = (fx == 0.0f || fx == 1.0f) && (fy == 0.0f || fy == 1.0f);
       const bool cubic =
-          options.cubic && channels <= 4 && accepted > 0.999 &&
+          options.cubic && !whole && channels <= 4 && accepted > 0.999 &&
           cubicSample(source, sourceGuides, qx, qy, currentGuides, here, options, value);
       if (!cubic)
         for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
