@@ -16,6 +16,9 @@ Scenes (all small, deterministic, built here):
   dolly      the camera pushing in and turning while a box slides diagonally across the floor
              (scale change, parallax and object motion; added in session 21 as a second
              held-out design, after the filter's session-21 changes were chosen)
+  lamp       the key light swinging towards the back wall and dimming while the camera
+             slides (light and camera change together; added in session 21, held out
+             from the relighting of neighbours whose light changed)
   convention a camera looking straight down at a textured plane, moving a known number of
              pixels per frame: (+3, +2) px from frame 1 to 2 and (+6, +4) px from 2 to 3
              (x right, y up, in the camera's view), to establish the Vector pass's
@@ -47,7 +50,7 @@ def script_argv():
 
 def parse_args():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scene", choices=("pan", "still", "object", "light", "orbit", "dolly", "convention"), required=True)
+    p.add_argument("--scene", choices=("pan", "still", "object", "light", "orbit", "dolly", "lamp", "convention"), required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--res", default="160x120", help="WIDTHxHEIGHT")
     p.add_argument("--frames", default="1-8", help="FIRST-LAST")
@@ -206,6 +209,10 @@ def build_room(scene, args):
                         material("roller", (0.8, 0.35, 0.1), 0.3, checker=4))
         drive(ball, "location", 0, "-2.5 + 0.3 * frame")
         drive(ball, "rotation_euler", 1, "0.6 * frame")
+    elif args.scene == "lamp":  # the key swinging back and dimming, the camera sliding 1 px/frame
+        drive(key_obj, "location", 1, "-1.0 + 0.45 * frame")
+        drive(key, "energy", -1, "900 - 50 * frame")
+        drive(cam, "location", 0, "0.5 - 0.03 * frame")
     elif args.scene == "dolly":  # pushing in about 0.12 m a frame, turning left, a box sliding
         drive(cam, "location", 0, "0.5 + 0.04 * frame")
         drive(cam, "location", 1, "-6.5 + 0.12 * frame")

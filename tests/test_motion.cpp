@@ -419,7 +419,7 @@ TEST_CASE("temporal filter: a blotch in the frame's own result is averaged out, 
   CHECK(blotchError(0.75) < 0.07);  // 0.5 / 9 if all nine frames were averaged
 }
 
-TEST_CASE("temporal filter: a light change over the whole frame leaves the neighbour out") {
+TEST_CASE("temporal filter: a neighbour whose light changed over the frame is relit first") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 500, 600);
   // A lamp moved: the neighbours are lit 20% brighter everywhere, too faint a
@@ -428,8 +428,36 @@ TEST_CASE("temporal filter: a light change over the whole frame leaves the neigh
     for (float& v : frames[t].denoised.pixels) v *= 1.2f;
     for (float& v : frames[t].noisy.pixels) v *= 1.2f;
   }
-  const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
-  const temporal::TemporalResult r = temporal::filterFrame(window, 1);
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
+  CHECK(r.stats.relit == 2);
+  CHECK(r.stats.changedLight == 0);
+  CHECK(r.stats.historyShare > 0.5);
+  // Brought to the frame's light, they lower its leftover error, and do not
+  // brighten it.
+  CHECK(meanSquaredError(r.color, truth.color) <
+        0.9 * meanSquaredError(frames[1].denoised, truth.color));
+  double result = 0.0, light = 0.0;
+  for (std::size_t i = 1; i < r.color.pixels.size(); i += 3)
+    result += r.color.pixels[i], light += truth.color.pixels[i];
+  CHECK(result / light == doctest::Approx(1.0).epsilon(0.01));
+}
+
+TEST_CASE("temporal filter: a change of light relighting cannot undo leaves the neighbour out") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 510, 610);
+  // Light changing from pixel to pixel (a flickering, dappled light): no
+  // local mean brings the neighbours to the frame's light.
+  std::mt19937 random(42);
+  std::uniform_real_distribution<float> factor(0.4f, 2.5f);
+  for (unsigned t : {0u, 2u})
+    for (std::size_t i = 0; i < frames[t].denoised.pixelCount(); ++i) {
+      const float f = factor(random);
+      for (int c = 0; c < 3; ++c) {
+        frames[t].denoised.pixels[3 * i + c] *= f;
+        frames[t].noisy.pixels[3 * i + c] *= f;
+      }
+    }
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
   CHECK(r.stats.changedLight == 2);
   CHECK(r.stats.historyShare == 0.0);
   CHECK(r.color.pixels == frames[1].denoised.pixels);

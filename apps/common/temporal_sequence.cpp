@@ -180,6 +180,8 @@ std::string TemporalSequence::report() const {
                                  lastStats_.neighbours == 1 ? "" : "s");
   if (lastStats_.repeatedNoise > 0)
     line += fmt::format(", {} repeating its noise and left out", lastStats_.repeatedNoise);
+  if (lastStats_.relit > 0)
+    line += fmt::format(", {} brought to its light first", lastStats_.relit);
   if (lastStats_.changedLight > 0)
     line += fmt::format(", {} with the light changed over the frame and left out",
                         lastStats_.changedLight);

@@ -146,6 +146,52 @@ std::vector<float> lightChange(const Image& current, const Image& moved, const I
   return z;
 }
 
+// Per pixel and channel, the mean of `image` over the (2r+1)^2 box of pixels
+// where `trust` > 0; -1 where the box holds none.
+Image trustedBoxMean(const Image& image, const Image& trust, int r) {
+  const int w = image.width, h = image.height, channels = image.channels, n = channels + 1;
+  // Integral images of the trusted values (channels 0..channels-1) and count.
+  std::vector<double> integral(static_cast<std::size_t>(w + 1) * (h + 1) * n, 0.0);
+  auto at = [&](int x, int y, int k) -> double& {
+    return integral[(static_cast<std::size_t>(y) * (w + 1) + x) * n + k];
+  };
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool trusted = trust.pixels[static_cast<std::size_t>(y) * w + x] > 0.0f;
+      for (int k = 0; k < n; ++k) {
+        const double v = !trusted ? 0.0 : k == channels ? 1.0 : image.at(x, y, k);
+        at(x + 1, y + 1, k) = v + at(x, y + 1, k) + at(x + 1, y, k) - at(x, y, k);
+      }
+    }
+  Image out(w, h, channels);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const int x0 = std::max(0, x - r), x1 = std::min(w, x + r + 1);
+      const int y0 = std::max(0, y - r), y1 = std::min(h, y + r + 1);
+      auto box = [&](int k) {
+        return at(x1, y1, k) - at(x0, y1, k) - at(x1, y0, k) + at(x0, y0, k);
+      };
+      const double count = box(channels);
+      for (int c = 0; c < channels; ++c)
+        out.at(x, y, c) = count > 0.0 ? static_cast<float>(box(c) / count) : -1.0f;
+    }
+  return out;
+}
+
+// A neighbour's result brought to the frame's light: each pixel scaled by the
+// ratio of the frame's and the neighbour's results, averaged over the
+// (2r+1)^2 box of trusted pixels around. What the neighbour adds is then its
+// detail within the box, whose leftover error differs from the frame's.
+Image relit(const Image& moved, const Image& own, const Image& trust, int r) {
+  const Image ownMean = trustedBoxMean(own, trust, r), movedMean = trustedBoxMean(moved, trust, r);
+  Image out = moved;
+  for (std::size_t i = 0; i < out.pixels.size(); ++i) {
+    const float a = ownMean.pixels[i], b = movedMean.pixels[i];
+    if (a >= 0.0f && b > 1e-6f) out.pixels[i] *= std::clamp(a / b, 0.1f, 10.0f);
+  }
+  return out;
+}
+
 motion::FrameGeometry geometryOf(const WindowFrame& frame) {
   return {&frame.guides, &frame.motion};
 }
@@ -179,11 +225,18 @@ Centre centreOf(const WindowFrame& frame) {
 // pixel from the surface and light tests (the colour test comes later, once
 // every neighbour is in); or why it was left out whole.
 struct Contribution {
-  enum class Verdict { Used, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
+  enum class Verdict { Used, Relit, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
   Image image;
   std::vector<double> weight;
   double spread = 0.0;  // of its differences from the frame's result, in local noise levels
 };
+
+// Per pixel, |tonemapped `image` - the frame's result|, in local noise levels.
+std::vector<float> normalisedDifference(const Centre& centre, const Image& image) {
+  std::vector<float> d = absoluteDifference(tonemapped(image, centre.scale), centre.mapped);
+  for (std::size_t i = 0; i < d.size(); ++i) d[i] /= centre.noise[i];
+  return d;
+}
 
 // `chain`: the centre's geometry, then each frame's up to the neighbour.
 Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
@@ -201,27 +254,36 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     out.verdict = Contribution::Verdict::RepeatedNoise;
     return out;
   }
-  std::vector<float> d = absoluteDifference(tonemapped(moved.image, centre.scale), centre.mapped);
-  for (std::size_t i = 0; i < d.size(); ++i) d[i] /= centre.noise[i];
+  out.image = std::move(moved.image);
+  double fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
   // Where the light changed over most of the frame (a moving lamp), the
-  // differences' own spread is large too. Then shading changes too faint for
-  // the tests below to find per pixel are everywhere: the neighbour is left
-  // out whole. Below that, the cap keeps moving shadows rejected.
-  const double fullSpread = robustSpread(d, moved.trust);
+  // differences' own spread is large too, and shading changes too faint for
+  // the per-pixel tests are everywhere. Such a neighbour is brought to the
+  // frame's light first, and left out whole if that does not bring its
+  // spread down. Below that, the cap keeps moving shadows rejected.
   if (fullSpread > options.changedLightSpread) {
-    out.verdict = Contribution::Verdict::ChangedLight;
-    return out;
+    out.image = relit(out.image, current.denoised, moved.trust, options.relightBox);
+    fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
+    if (fullSpread > options.changedLightSpread) {
+      out.verdict = Contribution::Verdict::ChangedLight;
+      return out;
+    }
+    out.verdict = Contribution::Verdict::Relit;
   }
   out.spread = std::min(fullSpread, options.maxSpread);
+  out.weight.assign(out.image.pixelCount(), 0.0);
+  // The renders' own light test would see the change that relighting undid.
+  if (out.verdict == Contribution::Verdict::Relit) {
+    std::copy(moved.trust.pixels.begin(), moved.trust.pixels.end(), out.weight.begin());
+    return out;
+  }
   const std::vector<float> changed =
       lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions),
                   moved.trust, centre.residual, residual, options.lightBox);
-  out.weight.assign(d.size(), 0.0);
-  for (std::size_t i = 0; i < d.size(); ++i)
+  for (std::size_t i = 0; i < out.weight.size(); ++i)
     out.weight[i] = moved.trust.pixels[i] * std::clamp((options.lightHigh - changed[i]) /
                                                            (options.lightHigh - options.lightLow),
                                                        0.0, 1.0);
-  out.image = std::move(moved.image);
   return out;
 }
 
@@ -329,6 +391,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   for (const Contribution& contribution : contributions) {
     result.stats.repeatedNoise += contribution.verdict == Contribution::Verdict::RepeatedNoise;
     result.stats.changedLight += contribution.verdict == Contribution::Verdict::ChangedLight;
+    result.stats.relit += contribution.verdict == Contribution::Verdict::Relit;
     std::size_t used = 0;
     for (std::size_t i = 0; i < contribution.weight.size(); ++i) {
       const double w = contribution.weight[i];

@@ -40,10 +40,15 @@ struct TemporalOptions {
   // experiments/render_sequences.py it is 0.16-0.20 at 4 spp and 0.21-0.26 at
   // 16 spp; a lamp moving across the room raises it to 1-7.
   double maxSpread = 0.3;
-  // A spread above this means the light changed over most of the frame: the
-  // neighbour is rejected whole (on the moving-lamp shot, filtering with the
-  // per-pixel tests alone left frames up to 0.3 dB worse than alone).
+  // A spread above this means the light changed over most of the frame (on
+  // the moving-lamp shot, filtering with the per-pixel tests alone left frames
+  // up to 0.3 dB worse than alone). The neighbour is relit: each pixel scaled
+  // by the ratio of the frame's and its results' means over the
+  // (2 relightBox + 1)^2 box around, which leaves it only its detail within
+  // the box; the renders' light test is then skipped. Still above it, the
+  // neighbour is left out whole.
   double changedLightSpread = 0.6;
+  int relightBox = 1;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
   // lightLow standard errors to 0 at lightHigh (a change of light).
@@ -61,6 +66,7 @@ struct TemporalStats {
   double historyShare = 0.0;    // mean over pixels of the neighbours' share of the weight
   int neighbours = 0;           // neighbours available in the window
   int repeatedNoise = 0;        // of them, rejected for repeating the frame's noise
+  int relit = 0;                // of them, brought to the frame's light first
   int changedLight = 0;         // of them, rejected for a change of light over the frame
   std::vector<double> trusted;  // per neighbour: share of pixels it contributed to
 };
