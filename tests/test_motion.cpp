@@ -376,6 +376,24 @@ TEST_CASE("temporal filter: independent leftovers average down; repeated noise d
   CHECK(temporal::filterFrame(edge, 3).stats.neighbours == 0);
 }
 
+TEST_CASE("temporal filter: a visible sun does not hide the rest of the frame") {
+  const Synthetic truth = makeFrame(128, 96, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 1200, 1300);
+  // A 4 x 4 sun 10^6 times brighter than the room, which the denoiser dims at
+  // its edge the same way in every frame: most of each frame's mean, and of
+  // its noisy-minus-denoised residual, until the tests' exposure ignores it.
+  for (auto& f : frames)
+    for (int y = 10; y < 14; ++y)
+      for (int x = 100; x < 104; ++x)
+        for (int c = 0; c < 3; ++c) {
+          f.noisy.at(x, y, c) = 1e6f;
+          f.denoised.at(x, y, c) = 1e5f;
+        }
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 2);
+  CHECK(r.stats.repeatedNoise == 0);
+  CHECK(r.stats.historyShare > 0.6);
+}
+
 TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 300, 400);

@@ -10,12 +10,16 @@
 #include <stdexcept>
 #include <thread>
 
+#include "dn/tonemap.h"
+
 namespace dn::temporal {
 
 namespace {
 
-// Reinhard's x / (1 + x) after bringing the frame's mean to 0.18: differences
-// then weigh as they show, in dark and bright frames alike.
+// Reinhard's x / (1 + x) after `scale`, OIDN's autoexposure of the frame's
+// result: differences then weigh as they show, in dark and bright frames alike.
+// (Not the mean: a visible sun can hold most of a frame's mean, and darken
+// everything else to nothing.)
 Image tonemapped(const Image& linear, double scale) {
   Image out = linear;
   for (float& v : out.pixels) {
@@ -23,13 +27,6 @@ Image tonemapped(const Image& linear, double scale) {
     v = static_cast<float>(s / (1.0 + s));
   }
   return out;
-}
-
-double exposureScale(const Image& color) {
-  double sum = 0.0;
-  for (float v : color.pixels) sum += std::max(0.0f, v);
-  const double mean = sum / std::max<std::size_t>(1, color.pixels.size());
-  return mean > 1e-12 ? 0.18 / mean : 1.0;
 }
 
 Image difference(const Image& a, const Image& b) {
@@ -199,7 +196,7 @@ motion::FrameGeometry geometryOf(const WindowFrame& frame) {
 // What the centre frame holds for the tests, computed once per frame.
 struct Centre {
   const WindowFrame* frame;
-  double scale;              // the exposure that brings its mean to 0.18
+  double scale;              // its autoexposure
   Image mapped;              // its result, tonemapped
   Image noisyMapped;         // its render, tonemapped
   Image residual;            // noisyMapped - mapped: its noise, as the denoiser saw it
@@ -207,7 +204,7 @@ struct Centre {
 };
 
 Centre centreOf(const WindowFrame& frame) {
-  Centre c{&frame, exposureScale(frame.denoised), {}, {}, {}, {}};
+  Centre c{&frame, tonemap::oidnExposure(frame.denoised), {}, {}, {}, {}};
   c.mapped = tonemapped(frame.denoised, c.scale);
   c.noisyMapped = tonemapped(frame.noisy, c.scale);
   c.residual = difference(c.noisyMapped, c.mapped);
