@@ -284,23 +284,36 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   return out;
 }
 
+// The frame's result (weight 1) and its neighbours' results, weighted per
+// pixel, summed in the neighbours' order (so the result does not depend on
+// threads): the mean per channel, and each pixel's total weight.
+struct WeightedMean {
+  std::vector<double> value;
+  std::vector<double> weight;
+};
+
+WeightedMean weightedMean(const Image& own, const std::vector<Contribution>& contributions) {
+  WeightedMean out{{own.pixels.begin(), own.pixels.end()},
+                   std::vector<double>(own.pixelCount(), 1.0)};
+  for (const Contribution& k : contributions)
+    for (std::size_t i = 0; i < k.weight.size(); ++i) {
+      if (k.weight[i] <= 0.0) continue;
+      out.weight[i] += k.weight[i];
+      for (int ch = 0; ch < 3; ++ch)
+        out.value[3 * i + ch] += k.weight[i] * k.image.pixels[3 * i + ch];
+    }
+  for (std::size_t i = 0; i < out.value.size(); ++i) out.value[i] /= out.weight[i / 3];
+  return out;
+}
+
 // What the colour test compares each neighbour with: the frame's result
 // blended with the mean of the frame and every neighbour the other tests kept.
 Image colourReference(const Image& own, const std::vector<Contribution>& contributions,
                       double blend) {
-  std::vector<double> sum(own.pixels.begin(), own.pixels.end());
-  std::vector<double> weight(own.pixelCount(), 1.0);
-  for (const Contribution& k : contributions)
-    for (std::size_t i = 0; i < k.weight.size(); ++i) {
-      if (k.weight[i] <= 0.0) continue;
-      weight[i] += k.weight[i];
-      for (int ch = 0; ch < 3; ++ch) sum[3 * i + ch] += k.weight[i] * k.image.pixels[3 * i + ch];
-    }
+  const std::vector<double> mean = weightedMean(own, contributions).value;
   Image out = own;
-  for (std::size_t i = 0; i < weight.size(); ++i)
-    for (int ch = 0; ch < 3; ++ch)
-      out.pixels[3 * i + ch] = static_cast<float>((1.0 - blend) * own.pixels[3 * i + ch] +
-                                                  blend * sum[3 * i + ch] / weight[i]);
+  for (std::size_t i = 0; i < out.pixels.size(); ++i)
+    out.pixels[i] = static_cast<float>((1.0 - blend) * own.pixels[i] + blend * mean[i]);
   return out;
 }
 
@@ -379,34 +392,23 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   forEach(contributions.size(), options.threads,
           [&](std::size_t n) { applyColourTest(contributions[n], referenceMapped, c, options); });
 
-  // Summed in the neighbours' order, so the result does not depend on threads.
-  const Image& base = current.denoised;
-  std::vector<double> sum(base.pixels.begin(), base.pixels.end());
-  std::vector<double> weight(base.pixelCount(), 1.0);
+  const WeightedMean mean = weightedMean(current.denoised, contributions);
   TemporalResult result;
+  result.color = Image(current.denoised.width, current.denoised.height, 3);
+  std::transform(mean.value.begin(), mean.value.end(), result.color.pixels.begin(),
+                 [](double v) { return static_cast<float>(v); });
   result.stats.neighbours = static_cast<int>(neighbours.size());
-  for (const Contribution& contribution : contributions) {
-    result.stats.repeatedNoise += contribution.verdict == Contribution::Verdict::RepeatedNoise;
-    result.stats.changedLight += contribution.verdict == Contribution::Verdict::ChangedLight;
-    result.stats.relit += contribution.verdict == Contribution::Verdict::Relit;
-    std::size_t used = 0;
-    for (std::size_t i = 0; i < contribution.weight.size(); ++i) {
-      const double w = contribution.weight[i];
-      if (w <= 0.0) continue;
-      ++used;
-      weight[i] += w;
-      for (int ch = 0; ch < 3; ++ch) sum[3 * i + ch] += w * contribution.image.pixels[3 * i + ch];
-    }
-    result.stats.trusted.push_back(double(used) / weight.size());
+  for (const Contribution& k : contributions) {
+    result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
+    result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
+    result.stats.relit += k.verdict == Contribution::Verdict::Relit;
+    const auto used =
+        std::count_if(k.weight.begin(), k.weight.end(), [](double w) { return w > 0.0; });
+    result.stats.trusted.push_back(double(used) / mean.weight.size());
   }
-  result.color = Image(base.width, base.height, 3);
   double share = 0.0;
-  for (std::size_t i = 0; i < weight.size(); ++i) {
-    for (int ch = 0; ch < 3; ++ch)
-      result.color.pixels[3 * i + ch] = static_cast<float>(sum[3 * i + ch] / weight[i]);
-    share += 1.0 - 1.0 / weight[i];
-  }
-  result.stats.historyShare = share / std::max<std::size_t>(1, weight.size());
+  for (double w : mean.weight) share += 1.0 - 1.0 / w;
+  result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());
   return result;
 }
 
