@@ -60,8 +60,10 @@ bool matchesAround(GuideTest test, const Guides& source, std::size_t s, const Gu
   if (test(source, s, current, c, o)) return true;
   const int r = o.neighbourhood, cx = static_cast<int>(c % width), cy = static_cast<int>(c / width);
   for (int y = std::max(0, cy - r); y <= std::min(height - 1, cy + r); ++y)
-    for (int x = std::max(0, cx - r); x <= std::min(width - 1, cx + r); ++x)
-      if (test(source, s, current, static_cast<std::size_t>(y) * width + x, o)) return true;
+    for (int x = std::max(0, cx - r); x <= std::min(width - 1, cx + r); ++x) {
+      const std::size_t k = static_cast<std::size_t>(y) * width + x;
+      if (k != c && test(source, s, current, k, o)) return true;
+    }
   return false;
 }
 
@@ -96,7 +98,7 @@ bool cubicSample(const Image& source, const Guides& sourceGuides, float qx, floa
                  float* out) {
   const int width = source.width, height = source.height, channels = source.channels;
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
-  if (x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
+  if (channels > 4 || x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
   const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
   std::array<double, 4> sum = {0, 0, 0, 0};
   for (int j = 0; j < 4; ++j)
@@ -104,12 +106,12 @@ bool cubicSample(const Image& source, const Guides& sourceGuides, float qx, floa
       const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
       if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options, false))
         return false;
-      for (int c = 0; c < channels && c < 4; ++c)
+      for (int c = 0; c < channels; ++c)
         sum[c] += wx[i] * wy[j] * source.pixels[tap * channels + c];
     }
-  for (int c = 0; c < channels && c < 4; ++c)
+  for (int c = 0; c < channels; ++c)
     if (sum[c] < 0.0) return false;
-  for (int c = 0; c < channels && c < 4; ++c) out[c] = static_cast<float>(sum[c]);
+  for (int c = 0; c < channels; ++c) out[c] = static_cast<float>(sum[c]);
   return true;
 }
 
@@ -192,7 +194,7 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
       // whole-pixel offset both are the tap itself).
       const bool whole = (fx == 0.0f || fx == 1.0f) && (fy == 0.0f || fy == 1.0f);
       const bool cubic =
-          options.cubic && !whole && channels <= 4 && accepted > 0.999 &&
+          options.cubic && !whole && accepted > 0.999 &&
           cubicSample(source, sourceGuides, qx, qy, currentGuides, here, options, value);
       if (!cubic)
         for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);

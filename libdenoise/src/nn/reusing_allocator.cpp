@@ -57,8 +57,9 @@ void* allocHuge(std::size_t bytes) {
 // become "idle". A request that no cached range holds first grows the cached
 // range at the top, if there is one: with the decoder's phases run one at a
 // time (oidn_unet.cpp) the high-water mark is lower, and giving back and
-// zeroing again otherwise doubled the fresh pages of a 4K frame. Where the range cannot be
-// reserved, large blocks come from aligned_alloc and go back on free.
+// zeroing again otherwise doubled the fresh pages of a 4K frame. Where the
+// range cannot be reserved, large blocks come from aligned_alloc and go back
+// on free.
 class ReusingCpuAllocator final : public c10::Allocator {
  public:
   // LibTorch 1.13 declares allocate const; 2.3 and later declare it non-const

@@ -1,7 +1,6 @@
 #include "dn/temporal/temporal_filter.h"
 
 #include <algorithm>
-#include <array>
 #include <atomic>
 #include <cmath>
 #include <exception>
@@ -73,28 +72,67 @@ double robustSpread(const std::vector<float>& d, const Image& trust) {
   return *quartile / 0.3186;
 }
 
+// Sums of per-pixel values over boxes of (2r+1)^2 pixels, clipped to the
+// image, from integral images: `values(i, v)` writes pixel i's `count` values.
+class BoxSums {
+ public:
+  template <class Values>
+  BoxSums(int width, int height, int count, Values values)
+      : width_(width),
+        height_(height),
+        count_(count),
+        integral_((width + 1) * std::size_t(height + 1) * count) {
+    std::vector<double> v(count);
+    for (int y = 0; y < height; ++y)
+      for (int x = 0; x < width; ++x) {
+        std::fill(v.begin(), v.end(), 0.0);
+        values(static_cast<std::size_t>(y) * width + x, v.data());
+        for (int k = 0; k < count; ++k)
+          at(x + 1, y + 1, k) = v[k] + at(x + 1, y, k) + at(x, y + 1, k) - at(x, y, k);
+      }
+  }
+
+  // The box of radius r around (x, y) and its pixel count, clipped.
+  struct Box {
+    int x0, y0, x1, y1;
+    int pixels() const { return (x1 - x0) * (y1 - y0); }
+  };
+  Box box(int x, int y, int r) const {
+    return {std::max(0, x - r), std::max(0, y - r), std::min(width_, x + r + 1),
+            std::min(height_, y + r + 1)};
+  }
+
+  double sum(const Box& b, int k) const {
+    return at(b.x1, b.y1, k) - at(b.x1, b.y0, k) - at(b.x0, b.y1, k) + at(b.x0, b.y0, k);
+  }
+
+ private:
+  double& at(int x, int y, int k) {
+    return integral_[(static_cast<std::size_t>(y) * (width_ + 1) + x) * count_ + k];
+  }
+  double at(int x, int y, int k) const {
+    return integral_[(static_cast<std::size_t>(y) * (width_ + 1) + x) * count_ + k];
+  }
+
+  int width_, height_, count_;
+  std::vector<double> integral_;
+};
+
 // Per pixel, the RMS over a (2r+1)^2 box of the frame's noise residual (mean
 // over channels): where the render is noisier, the denoised frames' leftover
 // errors, and so their differences, are larger.
 std::vector<float> localNoise(const Image& residual, int r) {
-  const int w = residual.width, h = residual.height;
-  std::vector<double> integral(static_cast<std::size_t>(w + 1) * (h + 1), 0.0);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      double e = 0.0;
-      for (int c = 0; c < residual.channels; ++c) e += std::pow(residual.at(x, y, c), 2);
-      integral[(y + 1) * (w + 1) + x + 1] = e / residual.channels + integral[y * (w + 1) + x + 1] +
-                                            integral[(y + 1) * (w + 1) + x] -
-                                            integral[y * (w + 1) + x];
-    }
+  const int w = residual.width, h = residual.height, channels = residual.channels;
+  const BoxSums sums(w, h, 1, [&](std::size_t i, double* v) {
+    double e = 0.0;
+    for (int c = 0; c < channels; ++c) e += std::pow(residual.pixels[i * channels + c], 2);
+    v[0] = e / channels;
+  });
   std::vector<float> out(residual.pixelCount());
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const int x0 = std::max(0, x - r), x1 = std::min(w, x + r + 1);
-      const int y0 = std::max(0, y - r), y1 = std::min(h, y + r + 1);
-      const double box = integral[y1 * (w + 1) + x1] - integral[y0 * (w + 1) + x1] -
-                         integral[y1 * (w + 1) + x0] + integral[y0 * (w + 1) + x0];
-      out[y * w + x] = static_cast<float>(std::sqrt(box / ((x1 - x0) * (y1 - y0))));
+      const BoxSums::Box box = sums.box(x, y, r);
+      out[y * w + x] = static_cast<float>(std::sqrt(sums.sum(box, 0) / box.pixels()));
     }
   return out;
 }
@@ -106,39 +144,25 @@ std::vector<float> localNoise(const Image& residual, int r) {
 std::vector<float> lightChange(const Image& current, const Image& moved, const Image& trust,
                                const Image& currentResidual, const Image& movedResidual, int r) {
   const int w = current.width, h = current.height, channels = current.channels;
-  // Integral images of: count, difference, and the two residuals' squares.
-  std::vector<std::array<double, 3>> integral(static_cast<std::size_t>(w + 1) * (h + 1));
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      std::array<double, 3> v = {0.0, 0.0, 0.0};
-      const std::size_t i = static_cast<std::size_t>(y) * w + x;
-      if (trust.pixels[i] > 0.0f) {
-        v[0] = 1.0;
-        for (int c = 0; c < channels; ++c) {
-          v[1] += (moved.pixels[i * channels + c] - current.pixels[i * channels + c]) / channels;
-          v[2] += (std::pow(currentResidual.pixels[i * channels + c], 2) +
-                   std::pow(movedResidual.pixels[i * channels + c], 2)) /
-                  (channels * channels);
-        }
-      }
-      auto& out = integral[(y + 1) * (w + 1) + x + 1];
-      const auto& up = integral[y * (w + 1) + x + 1];
-      const auto& left = integral[(y + 1) * (w + 1) + x];
-      const auto& corner = integral[y * (w + 1) + x];
-      for (int k = 0; k < 3; ++k) out[k] = v[k] + up[k] + left[k] - corner[k];
+  // Over trusted pixels: count, difference, and the two residuals' squares.
+  const BoxSums sums(w, h, 3, [&](std::size_t i, double* v) {
+    if (trust.pixels[i] <= 0.0f) return;
+    v[0] = 1.0;
+    for (int c = 0; c < channels; ++c) {
+      v[1] += (moved.pixels[i * channels + c] - current.pixels[i * channels + c]) / channels;
+      v[2] += (std::pow(currentResidual.pixels[i * channels + c], 2) +
+               std::pow(movedResidual.pixels[i * channels + c], 2)) /
+              (channels * channels);
     }
+  });
   std::vector<float> z(current.pixelCount(), 0.0f);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const int x0 = std::max(0, x - r), x1 = std::min(w, x + r + 1);
-      const int y0 = std::max(0, y - r), y1 = std::min(h, y + r + 1);
-      std::array<double, 3> box;
-      for (int k = 0; k < 3; ++k)
-        box[k] = integral[y1 * (w + 1) + x1][k] - integral[y0 * (w + 1) + x1][k] -
-                 integral[y1 * (w + 1) + x0][k] + integral[y0 * (w + 1) + x0][k];
-      if (box[0] < 1.0 || box[2] <= 0.0) continue;
+      const BoxSums::Box box = sums.box(x, y, r);
+      const double n = sums.sum(box, 0), difference = sums.sum(box, 1), variance = sums.sum(box, 2);
+      if (n < 1.0 || variance <= 0.0) continue;
       // The mean of n differences has variance sum(var) / n^2.
-      z[y * w + x] = static_cast<float>(std::abs(box[1] / box[0]) / (std::sqrt(box[2]) / box[0]));
+      z[y * w + x] = static_cast<float>(std::abs(difference / n) / (std::sqrt(variance) / n));
     }
   return z;
 }
@@ -146,31 +170,20 @@ std::vector<float> lightChange(const Image& current, const Image& moved, const I
 // Per pixel and channel, the mean of `image` over the (2r+1)^2 box of pixels
 // where `trust` > 0; -1 where the box holds none.
 Image trustedBoxMean(const Image& image, const Image& trust, int r) {
-  const int w = image.width, h = image.height, channels = image.channels, n = channels + 1;
-  // Integral images of the trusted values (channels 0..channels-1) and count.
-  std::vector<double> integral(static_cast<std::size_t>(w + 1) * (h + 1) * n, 0.0);
-  auto at = [&](int x, int y, int k) -> double& {
-    return integral[(static_cast<std::size_t>(y) * (w + 1) + x) * n + k];
-  };
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const bool trusted = trust.pixels[static_cast<std::size_t>(y) * w + x] > 0.0f;
-      for (int k = 0; k < n; ++k) {
-        const double v = !trusted ? 0.0 : k == channels ? 1.0 : image.at(x, y, k);
-        at(x + 1, y + 1, k) = v + at(x, y + 1, k) + at(x + 1, y, k) - at(x, y, k);
-      }
-    }
+  const int w = image.width, h = image.height, channels = image.channels;
+  // Over trusted pixels: the values, then the count.
+  const BoxSums sums(w, h, channels + 1, [&](std::size_t i, double* v) {
+    if (trust.pixels[i] <= 0.0f) return;
+    for (int c = 0; c < channels; ++c) v[c] = image.pixels[i * channels + c];
+    v[channels] = 1.0;
+  });
   Image out(w, h, channels);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const int x0 = std::max(0, x - r), x1 = std::min(w, x + r + 1);
-      const int y0 = std::max(0, y - r), y1 = std::min(h, y + r + 1);
-      auto box = [&](int k) {
-        return at(x1, y1, k) - at(x0, y1, k) - at(x1, y0, k) + at(x0, y0, k);
-      };
-      const double count = box(channels);
+      const BoxSums::Box box = sums.box(x, y, r);
+      const double count = sums.sum(box, channels);
       for (int c = 0; c < channels; ++c)
-        out.at(x, y, c) = count > 0.0 ? static_cast<float>(box(c) / count) : -1.0f;
+        out.at(x, y, c) = count > 0.0 ? static_cast<float>(sums.sum(box, c) / count) : -1.0f;
     }
   return out;
 }
