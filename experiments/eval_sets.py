@@ -185,7 +185,7 @@ def figure_lines(args, names, spec, folder, results_path):
     import numpy as np
     from PIL import Image
     from exrutil import read_color
-    from report import figure_tonemap
+    from page_sections import figure_tonemap
 
     where, spp = spec.rsplit(":", 1)
     group, scene = where.split("/")
@@ -208,8 +208,7 @@ def figure_lines(args, names, spec, folder, results_path):
             f"![{group} {scene} {spp} spp]({relative})"]
 
 
-SECTION_BEGIN = "<!-- eval_sets.py: begin -->"
-SECTION_END = "<!-- eval_sets.py: end -->"
+from page_sections import SECTION_BEGIN, SECTION_END  # noqa: E402
 
 
 def write_section(path, lines):

@@ -24,7 +24,7 @@ import sys
 import numpy as np
 from PIL import Image
 
-from eval_sets import SECTION_BEGIN, SECTION_END
+from page_sections import SECTION_BEGIN, SECTION_END, figure_tonemap
 from exrutil import read_color
 from metrics_io import HIGHER_IS_BETTER, case_path, load_case_metrics
 
@@ -74,14 +74,6 @@ def luminance(rgb):
 
 def clamp6(rgb):
     return np.clip(np.nan_to_num(rgb, nan=0.0, posinf=6.0, neginf=0.0), 0.0, 6.0)
-
-
-def figure_tonemap(rgb):
-    """dndenoise's default display transform (libtonemap/ocio/srgb.ocio, what -o out.png and
-    --preview write): clamp to [0, 1], the sRGB curve, 8 bits; so figures look as users see them."""
-    v = np.clip(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    encoded = np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(v, 1 / 2.4) - 0.055)
-    return (encoded * 255 + 0.5).astype(np.uint8)
 
 
 # ---------------------------------------------------------------- the run's data
