@@ -17,6 +17,11 @@
    then the quality levels and speed, then the ablations, each with its model file.
    Sections other scripts keep in the page (<!-- NAME: begin --> ... <!-- NAME: end -->)
    are carried over at its end.
+5. Inserts the hand-kept notes of experiments/results_notes/: which sets chose each setting
+   and which were held out (sets.md, after the list of sets), the temporal measurements
+   (temporal.md) and the measurements behind the defaults (measurements.md), at the end.
+   `--notes-only` refreshes just these sections in the existing page (no scoring, no
+   rendering: for a machine without the scored results in WORK).
 """
 
 import argparse
@@ -57,7 +62,36 @@ ABLATIONS = [
      "models/isik.pt",
      ["--skip-unusable", "--isik", "models/isik.pt"]),
 ]
-KEPT_ELSEWHERE = ("eval_sets.py",)  # sections this page regenerates itself
+NOTES = os.path.join(HERE, "results_notes")
+NOTES_TOP = ("sets.md",)                         # after the list of sets
+NOTES_END = ("temporal.md", "measurements.md")   # at the end of the page
+# sections this page regenerates itself (temporal_eval.py: the temporal notes' old place)
+KEPT_ELSEWHERE = ("eval_sets.py", "temporal_eval.py") + tuple(
+    f"results_notes/{n}" for n in NOTES_TOP + NOTES_END)
+
+
+def note_section(name):
+    """A hand-kept note of experiments/results_notes/, between markers."""
+    with open(os.path.join(NOTES, name)) as f:
+        body = f.read().strip("\n")
+    return f"<!-- results_notes/{name}: begin -->\n{body}\n<!-- results_notes/{name}: end -->"
+
+
+def refresh_notes(path):
+    """The existing page with its notes sections replaced by the templates' current text."""
+    text = open(path).read()
+    for name in KEPT_ELSEWHERE:
+        if name == "eval_sets.py":
+            continue
+        begin, end = f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
+        while begin in text and end in text:
+            head, rest = text.split(begin, 1)
+            text = head.rstrip("\n") + "\n\n" + rest.split(end, 1)[1].lstrip("\n")
+    anchor = "## The default against OIDN"
+    head, rest = text.split(anchor, 1)
+    top = "\n\n".join(note_section(n) for n in NOTES_TOP)
+    text = f"{head.rstrip()}\n\n{top}\n\n{anchor}{rest}".rstrip("\n")
+    return text + "\n\n" + "\n\n".join(note_section(n) for n in NOTES_END) + "\n"
 
 
 def run(cmd, **kw):
@@ -163,6 +197,7 @@ def page(args, command):
         "(experiments/render_evaldata.sh). A set missing here was not rendered in this run. Means over "
         "frames of PSNR (dB, Reinhard tonemap), FLIP and L1 (HDR), as `dnmetrics` computes them; "
         "higher PSNR, lower FLIP and L1 are better.", "",
+        *[note_section(n) + "\n" for n in NOTES_TOP],
         "## The default against OIDN", "",
         "`default`: `dndenoise` with no options, `models/default.dnm` (OIDN's networks in their prefilter "
         "mode, and the Control Module where the gate opens); `oidn`, `oidn_pre`: OIDN 2.5.1 itself through "
@@ -190,6 +225,8 @@ def page(args, command):
               "(experiments/oidn_denoise.py)."]
     for section in kept_sections(args.results):
         lines += ["", section]
+    for name in NOTES_END:
+        lines += ["", note_section(name)]
     return "\n".join(lines) + "\n"
 
 
@@ -208,14 +245,19 @@ def main():
                    help="do not time: the page keeps the table the last timed run stored in WORK")
     p.add_argument("--reuse", action="store_true", help="keep results already scored in WORK")
     p.add_argument("--page-only", action="store_true", help="write the page from stored results")
+    p.add_argument("--notes-only", action="store_true",
+                   help="refresh only the sections from experiments/results_notes/ in the existing page")
     args = p.parse_args()
     command = "python3 experiments/results.py" + "".join(
         f" {a}" for a in sys.argv[1:])
-    if not args.page_only:
-        if not args.no_render:
-            render(args)
-        score(args, OIDN + [DEFAULT] + LEVELS + ABLATIONS)
-    text = page(args, command)
+    if args.notes_only:
+        text = refresh_notes(args.results)
+    else:
+        if not args.page_only:
+            if not args.no_render:
+                render(args)
+            score(args, OIDN + [DEFAULT] + LEVELS + ABLATIONS)
+        text = page(args, command)
     tmp = f"{args.results}.tmp{os.getpid()}"
     with open(tmp, "w") as f:
         f.write(text)
