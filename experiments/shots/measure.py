@@ -1,0 +1,72 @@
+#!/usr/bin/env python3
+"""Time and reference noise per shot, from tiny renders; the set's time extrapolated.
+
+  python3 experiments/shots/measure.py [--res 64x48] [--spp 128] [--threads 2] [shot ...]
+
+For each shot renders frame 4 at --res: 4 spp (to warm the scene up), --spp with
+the noisy seed (timed), and two references of different seeds at --spp. Prints
+the seconds per sample per pixel, the PSNR of the two references (check_refs.py)
+and that PSNR carried to 1024 and 4096 spp (noise variance falls as 1/spp: +10
+log10(N/spp) dB), and the full shot's time at its resolution (8 frames of 4 + 16
+spp and the reference, one ref2 frame), extrapolated linearly in samples x pixels.
+"""
+
+import argparse
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from check_refs import combined, psnr  # noqa: E402
+
+SHOTS = ["room_dolly", "room_pan", "room_still", "fox_walk", "helmet_orbit", "vase_handheld", "toycar_pass",
+         "truck_track", "lamp_swing", "sun_sweep", "glass_turntable", "texture_dolly"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("shots", nargs="*", default=SHOTS)
+    ap.add_argument("--res", default="64x48")
+    ap.add_argument("--spp", type=int, default=128)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--python", default="/work/venv-bpy/bin/python")
+    args = ap.parse_args()
+    width, height = (int(v) for v in args.res.split("x"))
+    listing = subprocess.run([args.python, os.path.join(HERE, "shots.py"), "--list"], capture_output=True,
+                             text=True, check=True).stdout
+    table = {line.split()[0]: line.split()[1:4] for line in listing.splitlines() if line.strip()}
+    total = 0.0
+    print("| shot | s per Mspp-px | ref vs ref2 at %d spp | at 1024 | at 4096 | ref spp | shot res | shot time s |" % args.spp)
+    print("|---|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for shot in args.shots:
+            out = os.path.join(tmp, shot)
+            log = subprocess.run([args.python, os.path.join(HERE, "shots.py"), "--shot", shot, "--out", out,
+                                  "--res", args.res, "--frames", "4-4", "--spp", "4", str(args.spp),
+                                  "--ref-spp", str(args.spp), "--check-frames", "4", "--threads", str(args.threads)],
+                                 capture_output=True, text=True)
+            seconds = re.findall(r"spp%d\.0004\.exr \(\d+ spp\) ([\d.]+) s" % args.spp, log.stdout)
+            if log.returncode or not seconds:
+                print("| %s | failed: %s |" % (shot, log.stderr.strip().splitlines()[-1:]))
+                continue
+            per = float(seconds[0]) / (args.spp * width * height) * 1e6
+            moving = table[shot][2] == "moving"
+            ref = os.path.join(out, "ref.0004.exr" if moving else "ref.exr")
+            noise = psnr(combined(ref), combined(ref.replace("ref", "ref2")))
+            res, ref_spp = table[shot][0], int(table[shot][1])
+            pixels = math.prod(int(v) for v in res.split("x"))
+            samples = 8 * (4 + 16) + (8 if moving else 1) * ref_spp + ref_spp  # + one ref2 frame
+            shot_time = per * 1e-6 * samples * pixels
+            total += shot_time
+            print("| %s | %.2f | %.2f | %.2f | %.2f | %d | %s | %.0f |" % (
+                shot, per, noise, noise + 10 * math.log10(1024 / args.spp), noise + 10 * math.log10(4096 / args.spp),
+                ref_spp, res, shot_time), flush=True)
+    print("set: %.0f s (%.1f h) at %d threads, extrapolated" % (total, total / 3600, args.threads))
+
+
+if __name__ == "__main__":
+    main()
