@@ -52,7 +52,7 @@ class DN_OT_check(bpy.types.Operator):
         problems = prep.check(context.scene, context.scene.dn_denoise.passes)
         for line in problems:
             self.report({"WARNING"}, line)
-        _status(context, problems[0] if problems else "ready for dndenoise")
+        _status(context, "; ".join(problems) if problems else "ready for dndenoise")
         if not problems:
             self.report({"INFO"}, "ready for dndenoise")
         return {"FINISHED"}

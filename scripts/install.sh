@@ -4,6 +4,9 @@
 #   DN_SKIP_BLENDER=1  skip Blender (only the scene generator needs it; the
 #                      preview tests then skip Blender's Filmic)
 #   DN_PREFIX=/opt/dn  also install the tools, libraries, models and docs there
+#   DN_BPY_VENV=DIR    where the venv with bpy and openjd goes (default
+#                      ./build-venv-bpy) for the Blender extension's and the
+#                      farm template's tests
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -13,7 +16,7 @@ packages=(build-essential cmake ninja-build pkg-config git
           libtorch-dev libopenimageio-dev openimageio-tools libopenexr-dev
           libopencolorio-dev libfmt-dev doctest-dev libgloo-dev nlohmann-json3-dev
           blender-data  # Blender's OpenColorIO config (Filmic), for display pictures and their tests
-          python3 python3-pip)
+          python3 python3-pip python3-venv)
 [ "${DN_SKIP_BLENDER:-0}" = 1 ] || packages+=(blender mate-backgrounds)  # scene generator + its textures
 
 missing=()
@@ -33,7 +36,19 @@ if ! python3 -c "import numpy, flip_evaluator, pyoidn, skimage, OpenEXR" 2>/dev/
     python3 -m pip install -q --break-system-packages "${pip_packages[@]}"
 fi
 
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+# Blender as a Python module and the Open Job Description CLI, for the tests of
+# blender/ and farm/: a venv of their own, as bpy 5.0.1 needs Python 3.11 and numpy<2.
+bpy_venv=$(realpath -m "${DN_BPY_VENV:-build-venv-bpy}")
+bpy_packages=("bpy==5.0.1" "numpy<2" "openjd-cli==0.8.0")
+if ! "$bpy_venv/bin/python" -c "from importlib.metadata import version as v
+assert v('bpy') == '5.0.1' and v('openjd-cli') == '0.8.0' and int(v('numpy').split('.')[0]) < 2" 2>/dev/null
+then
+  echo "install.sh: installing ${bpy_packages[*]} into $bpy_venv" >&2
+  python3 -m venv "$bpy_venv"
+  "$bpy_venv/bin/python" -m pip install -q "${bpy_packages[@]}"
+fi
+
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release -DDN_BPY_VENV="$bpy_venv" >/dev/null
 cmake --build build -j"$(nproc)"
 if [ -n "${DN_PREFIX:-}" ]; then
   cmake --install build --prefix "$DN_PREFIX" >/dev/null
