@@ -14,10 +14,10 @@ Scenes (all small, deterministic, built here):
              object motion together; added after the filter's thresholds were set, as a
              held-out design)
   dolly      the camera pushing in and turning while a box slides diagonally across the floor
-             (scale change, parallax and object motion; added in session 21 as a second
-             held-out design, after the filter's session-21 changes were chosen)
+             (scale change, parallax and object motion; added on 2026-11-27 as a second
+             held-out design, after that day's changes to the filter were chosen)
   lamp       the key light swinging towards the back wall and dimming while the camera
-             slides (light and camera change together; added in session 21, held out
+             slides (light and camera change together; added on 2026-11-27, held out
              from the relighting of neighbours whose light changed)
   convention a camera looking straight down at a textured plane, moving a known number of
              pixels per frame: (+3, +2) px from frame 1 to 2 and (+6, +4) px from 2 to 3
