@@ -171,9 +171,10 @@ def sphere(name, centre, radius, mat):
     return obj
 
 
-def model(name, size, location=(0, 0, 0), turn=0.0):
-    """A glTF sample model from assets/gltf under one empty: its largest extent `size`
-    metres, standing on z = location.z, centred on location in x and y."""
+def model(name, size, location=(0, 0, 0), turn=0.0, drop=()):
+    """A glTF sample model from assets/gltf under one empty: its largest extent (as
+    posed at import) `size` metres, standing on z = location.z, centred on location
+    in x and y. Imported cameras and lights, and the objects named in `drop`, are removed."""
     folder = os.path.join(ASSETS, name)
     path = os.path.join(folder, name + ".glb")
     if not os.path.exists(path):
@@ -181,21 +182,26 @@ def model(name, size, location=(0, 0, 0), turn=0.0):
     before = set(bpy.data.objects)
     bpy.ops.import_scene.gltf(filepath=path)
     new = [o for o in bpy.data.objects if o not in before]
+    for o in [o for o in new if o.type in ("CAMERA", "LIGHT") or o.name in drop]:
+        new.remove(o)
+        bpy.data.objects.remove(o, do_unlink=True)
     bpy.context.view_layer.update()
-    corners = [o.matrix_world @ Vector(c) for o in new if o.type == "MESH" for c in o.bound_box]
+    graph = bpy.context.evaluated_depsgraph_get()
+    corners = []
+    for o in (o for o in new if o.type == "MESH"):
+        posed = o.evaluated_get(graph)  # with the armature's deformation
+        corners += [o.matrix_world @ v.co for v in posed.to_mesh().vertices]
+        posed.to_mesh_clear()
     low = Vector([min(c[i] for c in corners) for i in range(3)])
     high = Vector([max(c[i] for c in corners) for i in range(3)])
     scale = size / max(high - low)
     holder = bpy.data.objects.new(name, None)
     bpy.context.scene.collection.objects.link(holder)
-    for o in new:
-        if o.parent is None:
-            o.parent = holder
     inner = bpy.data.objects.new(name + "_offset", None)  # centres the model on the holder's origin
     bpy.context.scene.collection.objects.link(inner)
     inner.parent = holder
     for o in new:
-        if o.parent is holder:
+        if o.parent is None:
             o.parent = inner
     inner.location = (-(low.x + high.x) / 2, -(low.y + high.y) / 2, -low.z)
     holder.scale = (scale, scale, scale)
@@ -273,7 +279,9 @@ def handheld(obj, amount):
 
 def room(width, depth, height, window, floor_mat, wall_mat):
     """A closed room, x in [-w/2, w/2], y in [0, depth], z in [0, height]; a window
-    opening (x0, x1, z0, z1) in the wall at x = +w/2. 0.1 m thick walls."""
+    opening (y0, y1, z0, z1) in the wall at x = +w/2. 0.1 m thick walls. The film is
+    exposed two stops up, as a photographer would indoors."""
+    bpy.context.scene.cycles.film_exposure = 4.0
     t, w2 = 0.1, width / 2
     box("floor", (0, depth / 2, -t / 2), (width + 2 * t, depth + 2 * t, t), floor_mat)
     box("ceiling", (0, depth / 2, height + t / 2), (width + 2 * t, depth + 2 * t, t), wall_mat)
@@ -286,9 +294,9 @@ def room(width, depth, height, window, floor_mat, wall_mat):
         box("window_" + name, (w2 + t / 2, (ya + yb) / 2, (za + zb) / 2), (t, yb - ya, zb - za), wall_mat)
 
 
-def sun_through_window(energy=6.0, elevation=35.0, azimuth=200.0):
+def sun_through_window(energy=10.0, elevation=35.0, azimuth=200.0):
     """The sun outside the +x wall, shining in and down, a blue sky behind it."""
-    world_colour((0.35, 0.5, 0.8), 0.6)
+    world_colour((0.35, 0.5, 0.8), 2.0)
     return light("SUN", "sun", (8, 2, 6), energy, size=1.0,
                  rotation=(math.radians(90 - elevation), 0, math.radians(azimuth) - math.pi / 2))
 
@@ -299,7 +307,7 @@ def room_dolly():
     """Interior lit by the sun through a window; the camera pushes in on a chair and a sofa."""
     room(6, 7, 3, (2.0, 4.5, 0.8, 2.5), material("oak", (0.55, 0.35, 0.2), 0.4, "wood", 3.0),
          material("plaster", (0.8, 0.78, 0.72), 0.9))
-    sun_through_window(6.0, 30.0, 195.0)
+    sun_through_window(10.0, 30.0, 195.0)
     model("GlamVelvetSofa", 2.2, (-1.6, 4.5, 0), math.pi / 2)
     model("SheenChair", 0.9, (0.6, 3.6, 0), -0.6)
     cam, aim = camera((0.3, 0.4, 1.5), (-0.5, 5.0, 0.7), 24)
@@ -311,7 +319,7 @@ def room_pan():
     """Another interior (long room, low sun, a rug); the camera pans from the window across the room."""
     room(5, 8, 2.8, (3.0, 6.0, 0.6, 2.3), material("tiles", (0.75, 0.72, 0.65), 0.3, "checker", 14.0),
          material("paint", (0.6, 0.7, 0.62), 0.85))
-    sun_through_window(8.0, 20.0, 215.0)
+    sun_through_window(12.0, 20.0, 215.0)
     box("rug", (-0.6, 4.2, 0.005), (2.0, 3.0, 0.01), material("rug", (0.6, 0.15, 0.1), 0.9, "noise", 40.0))
     model("SheenChair", 0.9, (-1.2, 3.0, 0), 0.9)
     model("GlamVelvetSofa", 2.0, (-1.9, 6.0, 0), math.pi / 2)
@@ -326,7 +334,7 @@ def room_still():
          material("plaster", (0.85, 0.82, 0.78), 0.9))
     for i in range(6):  # horizontal slats in the window
         box("slat%d" % i, (2.05, 2.4, 1.0 + 0.22 * i), (0.02, 2.8, 0.05), material("slat", (0.9, 0.9, 0.9), 0.5))
-    sun_through_window(7.0, 40.0, 205.0)
+    sun_through_window(10.0, 40.0, 205.0)
     box("table", (0.2, 2.8, 0.375), (1.2, 0.8, 0.75), material("table", (0.3, 0.2, 0.15), 0.25))
     model("DamagedHelmet", 0.4, (0.2, 2.8, 0.75), -2.2)
     model("SheenChair", 0.85, (-1.0, 2.6, 0), 1.2)
@@ -337,16 +345,16 @@ def fox_walk():
     """A skinned fox walking across a sunlit room; the camera pans to follow it."""
     room(6, 6, 2.8, (1.5, 4.5, 0.4, 2.4), material("floor", (0.6, 0.55, 0.45), 0.6, "brick", 6.0),
          material("wall", (0.75, 0.7, 0.6), 0.9))
-    sun_through_window(7.0, 35.0, 200.0)
-    fox = model("Fox", 1.1, (-2.2, 3.0, 0), 0.0)
+    sun_through_window(10.0, 35.0, 200.0)
+    fox = model("Fox", 1.0, (-2.2, 3.0, 0), -math.pi / 2)
     arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
     for track in list(arm.animation_data.nla_tracks):
         arm.animation_data.nla_tracks.remove(track)
     arm.animation_data.action = bpy.data.actions["Walk"]
     drive(fox, "location", 0, "-2.2 + 0.16 * frame")
     model("SheenChair", 0.9, (1.2, 4.2, 0), -2.4)
-    cam, aim = camera((0.0, 0.3, 1.3), (-1.6, 3.0, 0.3), 30)
-    drive(aim, "location", 0, "-1.6 + 0.14 * frame")
+    cam, aim = camera((-0.6, 1.0, 1.0), (-1.9, 3.0, 0.35), 30)
+    drive(aim, "location", 0, "-1.9 + 0.15 * frame")
 
 
 def helmet_orbit():
@@ -380,9 +388,9 @@ def toycar_pass():
     """A toy car rolling across a sunlit table (city HDRI): disocclusion and a moving shadow; handheld."""
     world_hdri("city", 1.0, 1.0)
     light("SUN", "sun", (0, 0, 10), 4.0, 1.0, (math.radians(40), 0, math.radians(70)))
-    box("table", (0, 0, -0.02), (3, 2, 0.04), material("table", (0.6, 0.45, 0.3), 0.3, "wood", 4.0))
+    box("table", (0, 0, -0.02), (3, 2, 0.04), material("table", (0.6, 0.45, 0.3), 0.3, "wood", 12.0))
     box("book", (0.05, 0.25, 0.04), (0.22, 0.3, 0.08), material("book", (0.15, 0.25, 0.5), 0.6))
-    car = model("ToyCar", 0.35, (-0.55, 0.05, 0), 0.0)
+    car = model("ToyCar", 0.3, (-0.55, 0.05, 0), 0.0, drop=("Fabric",))
     drive(car, "location", 0, "-0.55 + 0.12 * frame")
     cam, aim = camera((0.1, -0.9, 0.45), (0.0, 0.1, 0.05), 35)
     handheld(cam, 0.003)
@@ -410,7 +418,7 @@ def lamp_swing():
     box("table", (0, 2.8, 0.375), (1.2, 0.9, 0.75), material("table", (0.35, 0.22, 0.12), 0.3, "wood", 5.0))
     model("GlassVaseFlowers", 0.4, (0.2, 2.8, 0.75), 0.0)
     model("SheenChair", 0.85, (-0.9, 2.2, 0), 0.6)
-    lamp = light("POINT", "lamp", (0, 2.8, 1.9), 120.0, 0.06, colour=(1.0, 0.85, 0.6))
+    lamp = light("POINT", "lamp", (0, 2.8, 1.9), 40.0, 0.06, colour=(1.0, 0.85, 0.6))
     drive(lamp, "location", 0, "0.6 * sin(0.35 * frame)")
     drive(lamp, "location", 2, "1.9 + 0.15 * (1 - cos(0.35 * frame))")
     camera((-1.6, 0.3, 1.6), (0.1, 2.8, 0.9), 26)
@@ -424,10 +432,10 @@ def sun_sweep():
     drive(sun, "rotation_euler", 2, "-0.5 + 0.12 * frame")
     box("deck", (0, 0, -0.05), (10, 10, 0.1), material("deck", (0.5, 0.4, 0.3), 0.5, "wood", 2.0))
     model("GlamVelvetSofa", 2.0, (0, 0.6, 0), 0.0)
-    model("DamagedHelmet", 0.4, (0.9, -0.5, 0), 0.5)
-    cam, aim = camera((0, -4.0, 1.8), (0, 0.2, 0.5), 35)
-    drive(cam, "location", 0, "4.0 * sin(0.02 * frame)")
-    drive(cam, "location", 1, "-4.0 * cos(0.02 * frame)")
+    model("DamagedHelmet", 0.5, (0.9, -0.6, 0), 0.5)
+    cam, aim = camera((0, -3.0, 1.4), (0, 0.2, 0.4), 35)
+    drive(cam, "location", 0, "3.0 * sin(0.02 * frame)")
+    drive(cam, "location", 1, "-3.0 * cos(0.02 * frame)")
 
 
 def glass_turntable():
@@ -441,10 +449,10 @@ def glass_turntable():
     disc = box("disc", (0, 0, 0.02), (1.4, 1.4, 0.04), material("disc", (0.2, 0.2, 0.22), 0.2, "checker", 20.0))
     parts = [disc, sphere("glass", (0.35, 0, 0.2), 0.16, material("glass", (1, 1, 1), 0.0, transmission=1.0)),
              sphere("chrome", (-0.3, 0.2, 0.14), 0.1, material("chrome", (0.9, 0.9, 0.9), 0.08, metallic=1.0)),
-             model("DamagedHelmet", 0.3, (0, -0.3, 0.04), 0.0)]
+             model("DamagedHelmet", 0.4, (-0.1, 0.35, 0.04), 0.0)]
     for part in parts:
         part.parent = table
-    camera((0, -1.8, 0.8), (0, 0, 0.15), 45)
+    camera((0, -1.9, 0.9), (0, 0.1, 0.2), 40)
 
 
 def texture_dolly():
@@ -453,8 +461,8 @@ def texture_dolly():
     light("SUN", "sun", (0, 0, 10), 3.0, 0.5, (math.radians(70), 0, math.radians(120)))
     box("floor", (0, 4, -0.05), (6, 12, 0.1), material("tiles", (0.7, 0.65, 0.55), 0.35, "brick", 12.0))
     box("wall", (-1.5, 4, 0.6), (0.1, 12, 1.2), material("bricks", (0.6, 0.3, 0.2), 0.8, "brick", 8.0))
-    model("ToyCar", 0.4, (0.3, 3.0, 0), 2.4)
-    model("Fox", 0.6, (-0.6, 5.5, 0), -0.8)
+    model("ToyCar", 0.5, (0.25, 2.2, 0), 2.4, drop=("Fabric",))
+    model("Fox", 0.9, (-0.6, 4.0, 0), -0.8)
     cam, aim = camera((0.2, -0.5, 0.35), (0.0, 4.0, 0.1), 30)
     drive(cam, "location", 1, "-0.5 + 0.15 * frame")
     drive(aim, "location", 1, "4.0 + 0.15 * frame")
