@@ -99,6 +99,22 @@ def _plan(context):
     return cmd, output
 
 
+def _compositor(scene):
+    """The scene's compositing nodes, made as Blender makes them where there are none:
+    the render passes straight through, so that adding the result changes no render."""
+    if not hasattr(scene, "compositing_node_group"):  # Blender 4: use_nodes makes that tree
+        scene.use_nodes = True
+        return scene.node_tree
+    if scene.compositing_node_group is None:  # Blender 5: a node group, empty when new
+        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
+        tree.interface.new_socket(name="Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        layers, output = tree.nodes.new("CompositorNodeRLayers"), tree.nodes.new("NodeGroupOutput")
+        output.location.x = 400
+        tree.links.new(layers.outputs["Image"], output.inputs["Image"])
+        scene.compositing_node_group = tree
+    return scene.compositing_node_group
+
+
 def _load(context, output):
     """The result as an image sequence, and optionally an Image node in the compositor."""
     scene, frames = context.scene, output.frames
@@ -107,18 +123,13 @@ def _load(context, output):
     image.reload()  # a sequence loaded before holds the last result's pixels
     if not scene.dn_denoise.use_compositor:
         return image
-    if hasattr(scene, "compositing_node_group"):  # Blender 5: the compositor is a node group
-        if scene.compositing_node_group is None:
-            scene.compositing_node_group = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
-        tree = scene.compositing_node_group
-    else:
-        scene.use_nodes = True
-        tree = scene.node_tree
+    tree = _compositor(scene)
     node = tree.nodes.get("dndenoise") or tree.nodes.new("CompositorNodeImage")
     node.name = node.label = "dndenoise"
     node.image = image
     node.frame_start, node.frame_duration = frames[0], frames[-1] - frames[0] + 1
     node.frame_offset = frames[0] - 1  # scene frame N shows file frame N
+    node.location.y = -400
     return image
 
 
@@ -137,7 +148,7 @@ class DN_OT_denoise(bpy.types.Operator):
         try:
             cmd, self._output = _plan(context)
             os.makedirs(os.path.dirname(self._output.path(self._output.frames[0])), exist_ok=True)
-            self._job = runner.Job(cmd)
+            self._job = runner.Job(cmd, len(self._output.frames))
         except runner.DenoiseError as e:
             _status(context, str(e))
             self.report({"ERROR"}, str(e))

@@ -173,8 +173,10 @@ class Job:
     """dndenoise in a child process; a thread collects its lines so that Blender's UI
     can poll them from a timer without blocking."""
 
-    def __init__(self, cmd):
+    def __init__(self, cmd, frames):
         self.cmd = cmd
+        self.frames = frames  # how many frames the command writes
+        self.written = 0
         self.fraction = 0.0
         self.warnings = []   # lines worth a warning in Blender (frame by frame, clamped values)
         self.lines = []      # everything dndenoise printed
@@ -210,9 +212,17 @@ class Job:
         m = _PROGRESS.search(line)
         if m:
             done, total, percent = (int(g) for g in m.groups())
-            self.fraction = min(1.0, (done - 1 + percent / 100) / total)
+            self._advance((done - 1 + percent / 100) / total)
+        elif line.startswith("dndenoise: wrote "):
+            # The temporal filter denoises frames ahead as neighbours and then has no
+            # progress to report for them: the frames written count as well.
+            self.written += 1
+            self._advance(self.written / self.frames)
         elif "frame by frame" in line or "clamped" in line:
             self.warnings.append(line)
+
+    def _advance(self, fraction):
+        self.fraction = max(self.fraction, min(1.0, fraction))  # never backwards
 
     def wait(self, on_progress=None):
         """Blocks until dndenoise ends (headless use); calls on_progress(fraction) as it goes."""

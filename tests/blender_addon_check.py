@@ -43,6 +43,40 @@ def psnr(a, ref):
     return 10 * np.log10(1 / np.mean((a - ref) ** 2))
 
 
+def check_runner(dndenoise, source, work):
+    """blender/runner.py as the modal operator drives it: polled from a timer, with
+    progress, and cancelled (Esc) without leaving a partial frame."""
+    sys.path.insert(0, os.path.join(source, "blender"))
+    import runner
+    seq = runner.sequence_from_paths("/r/shot_0009_b.exr", 9, "/r/shot_0010_b.exr", [9, 10])
+    check("frame paths from frame_path -> pattern", seq.printf() == "/r/shot_%04d_b.exr" and
+          seq.frame_range() == "9-10", seq.printf())
+    shot = runner.sequence_of(os.path.join(source, "testdata", "sequence"))
+    check("a folder -> its sequence", shot.frames == [1, 2, 3, 4, 5, 6], shot.frames)
+    shot.frames = [1, 2, 3]
+    out = runner.output_sequence(os.path.join(work, "polled", "den.####.exr"), shot.frames)
+    os.makedirs(os.path.join(work, "polled"))
+    job = runner.Job(runner.command(dndenoise, shot, out, "fast", threads=2), 3)
+    fractions = []
+    while not job.poll():
+        time.sleep(0.05)
+        fractions.append(job.fraction)
+    check("polled like the modal timer: progress rises to the end, no error",
+          job.error() is None and job.fraction == 1.0 and fractions == sorted(fractions), job.lines[-3:])
+    check("and wrote the 3 frames", sorted(os.listdir(os.path.join(work, "polled"))) ==
+          [f"den.{n:04d}.exr" for n in (1, 2, 3)])
+    out = runner.output_sequence(os.path.join(work, "cancelled", "den.####.exr"), shot.frames)
+    os.makedirs(os.path.join(work, "cancelled"))
+    job = runner.Job(runner.command(dndenoise, shot, out, "high", threads=2), 3)
+    while not job.poll() and not any("[1/3]" in line for line in job.lines):
+        time.sleep(0.01)
+    job.cancel()
+    job.wait()
+    left = os.listdir(os.path.join(work, "cancelled"))
+    check("cancelled: one line, no unfinished file", job.error().startswith("dndenoise cancelled") and
+          all(n.startswith("den.") and n.endswith(".exr") for n in left), (job.error(), left))
+
+
 def main():
     ap = argparse.ArgumentParser()
     for a in ("--venv", "--dndenoise", "--source", "--work-dir"):
@@ -67,6 +101,8 @@ def main():
     tool = os.path.join(out.stdout.strip().splitlines()[-1], "addons_core", "bl_pkg", "cli", "blender_ext.py")
     out = run([python, tool, "validate", zip_path])
     check("Blender's extension tool validates the zip", out.returncode == 0, out.stdout + out.stderr)
+
+    check_runner(os.path.abspath(args.dndenoise), args.source, work)
 
     # Blender's user folders in the work dir: the install must not touch ~/.config.
     env = dict(os.environ, BLENDER_USER_RESOURCES=os.path.join(work, "user"))
