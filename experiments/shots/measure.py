@@ -5,7 +5,8 @@
 
 For each shot renders frame 4 at --res: 4 spp (to warm the scene up), --spp with
 the noisy seed (timed), and two references of different seeds at --spp. Prints
-the seconds per sample per pixel, the PSNR of the two references (check_refs.py)
+the seconds per million samples x pixels (CPU seconds / threads: the wall time on
+cores no one else uses; the wall time is longer while other work shares them), the PSNR of the two references (check_refs.py)
 and that PSNR carried to 1024 and 4096 spp (noise variance falls as 1/spp: +10
 log10(N/spp) dB), and the full shot's time at its resolution (8 frames of 4 + 16
 spp and the reference, one ref2 frame), extrapolated linearly in samples x pixels.
@@ -49,11 +50,12 @@ def main():
                                   "--res", args.res, "--frames", "4-4", "--spp", "4", str(args.spp),
                                   "--ref-spp", str(args.spp), "--check-frames", "4", "--threads", str(args.threads)],
                                  capture_output=True, text=True)
-            seconds = re.findall(r"spp%d\.0004\.exr \(\d+ spp\) ([\d.]+) s" % args.spp, log.stdout)
+            # CPU seconds over the threads: the wall time on cores no one else uses
+            seconds = re.findall(r"spp%d\.0004\.exr \(\d+ spp\) [\d.]+ s, ([\d.]+) s of CPU" % args.spp, log.stdout)
             if log.returncode or not seconds:
                 print("| %s | failed: %s |" % (shot, log.stderr.strip().splitlines()[-1:]))
                 continue
-            per = float(seconds[0]) / (args.spp * width * height) * 1e6
+            per = float(seconds[0]) / args.threads / (args.spp * width * height) * 1e6
             moving = table[shot][2] == "moving"
             ref = os.path.join(out, "ref.0004.exr" if moving else "ref.exr")
             noise = psnr(combined(ref), combined(ref.replace("ref", "ref2")))
