@@ -73,7 +73,7 @@ def check_runner(dndenoise, source, work):
     job.cancel()
     job.wait()
     left = os.listdir(os.path.join(work, "cancelled"))
-    check("cancelled: one line, no unfinished file", job.error().startswith("dndenoise cancelled") and
+    check("cancelled: one line, no unfinished file", (job.error() or "").startswith("dndenoise cancelled") and
           all(n.startswith("den.") and n.endswith(".exr") for n in left), (job.error(), left))
 
 
