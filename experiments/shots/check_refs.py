@@ -34,7 +34,7 @@ def psnr(a, b):
 
 def pairs(folder):
     for second in sorted(glob.glob(os.path.join(folder, "ref2*.exr"))):
-        first = second.replace("ref2", "ref")
+        first = os.path.join(folder, os.path.basename(second).replace("ref2", "ref", 1))
         if os.path.exists(first):
             yield first, second
 

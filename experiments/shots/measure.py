@@ -57,8 +57,8 @@ def main():
                 continue
             per = float(seconds[0]) / args.threads / (args.spp * width * height) * 1e6
             moving = table[shot][2] == "moving"
-            ref = os.path.join(out, "ref.0004.exr" if moving else "ref.exr")
-            noise = psnr(combined(ref), combined(ref.replace("ref", "ref2")))
+            name = "ref%s.0004.exr" if moving else "ref%s.exr"
+            noise = psnr(combined(os.path.join(out, name % "")), combined(os.path.join(out, name % "2")))
             res, ref_spp = table[shot][0], int(table[shot][1])
             pixels = math.prod(int(v) for v in res.split("x"))
             samples = 8 * (4 + 16) + (8 if moving else 1) * ref_spp + ref_spp  # + one ref2 frame
