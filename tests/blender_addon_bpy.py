@@ -153,6 +153,16 @@ def main():
     seen["novec_denoise"] = call(bpy.ops.dn_denoise.denoise)
     seen["novec_status"] = settings.status
 
+    # Light passes: Prepare adds them (and the Vector pass back), Denoise --passes
+    # writes them denoised.
+    settings.passes = True
+    call(bpy.ops.dn_denoise.prepare)
+    seen["passes_prepare"] = settings.status
+    scene.frame_end = 2
+    render(scene, os.path.join(work, "passes"), 4)
+    settings.source, settings.output_pattern = "RENDER", os.path.join(work, "passes_den", "shot.####.exr")
+    seen["passes_denoise"] = call(bpy.ops.dn_denoise.denoise)
+
     with open(args.out, "w") as f:
         json.dump(seen, f, indent=1)
 

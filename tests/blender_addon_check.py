@@ -164,6 +164,16 @@ def main():
     check("no Vector pass: Denoise finishes with dndenoise's frame-by-frame line as a warning",
           seen["novec_denoise"] == [["FINISHED"], ""] and "frame by frame" in seen["novec_status"],
           seen["novec_status"])
+
+    check("Light Passes: Prepare adds 13 passes and the Vector pass back",
+          seen["passes_prepare"] == "prepared: 14 settings changed", seen["passes_prepare"])
+    passes_den = os.path.join(work, "passes_den", "shot.0002.exr")
+    with OpenEXR.File(passes_den) as f:
+        layers = {p.name() for p in f.parts}
+    check("Light Passes: Denoise writes them denoised beside the noisy ones",
+          seen["passes_denoise"] == [["FINISHED"], ""] and
+          {"ViewLayer.Denoised Diffuse Direct", "ViewLayer.Denoised Glossy Color", "ViewLayer.Diffuse Direct"}
+          <= layers, (seen["passes_denoise"], sorted(layers)))
     return summary()
 
 
