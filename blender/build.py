@@ -13,8 +13,9 @@ import tomllib
 import zipfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-# What the extension is made of; build.py itself stays out.
-FILES = ["blender_manifest.toml", "__init__.py", "operators.py", "prepare.py", "runner.py"]
+# The manifest and every module but this script: what Blender's own
+# `blender --command extension build` packs, given the manifest's paths_exclude_pattern.
+FILES = ["blender_manifest.toml"] + sorted(n for n in os.listdir(HERE) if n.endswith(".py") and n != "build.py")
 
 
 def main():

@@ -101,6 +101,12 @@ def main():
     tool = os.path.join(out.stdout.strip().splitlines()[-1], "addons_core", "bl_pkg", "cli", "blender_ext.py")
     out = run([python, tool, "validate", zip_path])
     check("Blender's extension tool validates the zip", out.returncode == 0, out.stdout + out.stderr)
+    native = os.path.join(work, "native")
+    os.makedirs(native)
+    out = run([python, tool, "build", "--source-dir", os.path.join(args.source, "blender"), "--output-dir", native])
+    built = os.path.join(native, os.path.basename(zip_path))
+    check("and builds a zip of the same files from blender/", out.returncode == 0 and os.path.exists(built) and
+          sorted(zipfile.ZipFile(built).namelist()) == sorted(names), out.stdout + out.stderr)
 
     check_runner(os.path.abspath(args.dndenoise), args.source, work)
 
