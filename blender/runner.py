@@ -1,7 +1,7 @@
 """Everything about running dndenoise that does not need Blender: finding and
 checking the program, naming a sequence's frames, the command line, and a job
-that reads its progress without blocking. Kept free of bpy so that the farm
-scripts and tests can use the same rules."""
+that reads its progress without blocking. Free of bpy, so that the tests
+drive it as the modal operator does without a Blender window."""
 
 import os
 import queue
