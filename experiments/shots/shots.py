@@ -291,8 +291,6 @@ def room(width, depth, height, window, floor_mat, wall_mat):
     box("front", (0, -t / 2, height / 2), (width, t, height), wall_mat)
     box("left", (-w2 - t / 2, depth / 2, height / 2), (t, depth, height), wall_mat)
     y0, y1, z0, z1 = window
-    global LAST_WINDOW, LAST_WALL_X
-    LAST_WINDOW, LAST_WALL_X = window, w2 + t
     for name, (ya, yb, za, zb) in {"below": (0, depth, 0, z0), "above": (0, depth, z1, height),
                                   "side0": (0, y0, z0, z1), "side1": (y1, depth, z0, z1)}.items():
         box("window_" + name, (w2 + t / 2, (ya + yb) / 2, (za + zb) / 2), (t, yb - ya, zb - za), wall_mat)
