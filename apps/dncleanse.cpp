@@ -24,11 +24,11 @@
 #include "common/version.h"
 #include "dn/data/dataset.h"
 #include "dn/infer/denoiser.h"
-#include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/nn/kernel_net.h"
 #include "dn/nn/model_file.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/train/kernel_trainer.h"
 
 namespace fs = std::filesystem;

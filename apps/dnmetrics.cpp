@@ -212,15 +212,13 @@ bool isImageFile(const fs::path& p) {
 // pattern, REF a pattern of the same frame numbers or one file for them all.
 std::vector<std::array<std::string, 3>> pairUpSequence(const Options& o) {
   std::vector<std::array<std::string, 3>> pairs;
-  const bool refPattern = cli::isFramePattern(o.inputs[0]);
+  const bool refPattern = isFramePattern(o.inputs[0]);
   for (const auto& [number, test] : cli::sequenceFrames(o.inputs[1], "", false, "dnmetrics"))
-    pairs.push_back({refPattern ? cli::frameFile(o.inputs[0], number) : o.inputs[0], test, test});
+    pairs.push_back({refPattern ? frameFile(o.inputs[0], number) : o.inputs[0], test, test});
   return pairs;
 }
 
-bool isSequence(const Options& o) {
-  return o.inputs.size() == 2 && cli::isFramePattern(o.inputs[1]);
-}
+bool isSequence(const Options& o) { return o.inputs.size() == 2 && isFramePattern(o.inputs[1]); }
 
 // (reference, test, display name) triples for both modes.
 std::vector<std::array<std::string, 3>> pairUp(const Options& o) {

@@ -23,19 +23,19 @@
 #include "common/cli.h"
 #include "common/progress.h"
 #include "common/version.h"
-#include "dn/data/training_data.h"
 #include "dn/diffusion/refine.h"
 #include "dn/diffusion/sampler.h"
 #include "dn/infer/control_inputs.h"
 #include "dn/infer/denoiser.h"
-#include "dn/infer/model_inputs.h"
 #include "dn/io/buffer_io.h"
 #include "dn/io/output_files.h"
 #include "dn/nn/control_module.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/nn/oidn_import.h"
 #include "dn/train/control_loss.h"
 #include "dn/train/distributed.h"
 #include "dn/train/trainer.h"
+#include "dn/train/training_data.h"
 
 namespace fs = std::filesystem;
 using namespace dn;

@@ -7,8 +7,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "dn/infer/model_inputs.h"
 #include "dn/nn/kernel_net.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/train/kernel_trainer.h"
 
 using namespace dn;

@@ -1,8 +1,8 @@
 // The temporal filter of `dndenoise --temporal on`, run over frames already
 // denoised alone (`dndenoise --temporal off --float`), so that its settings
 // can be measured in seconds instead of re-denoising every frame. The same
-// code path as dndenoise (apps/common/temporal_sequence.cpp), with the
-// "denoiser" reading the frame's stored result.
+// code path as dndenoise (dn/temporal/sequence.h), with the "denoiser"
+// reading the frame's stored result.
 //   temporal_refilter NOISY.#.exr ALONE.#.exr -o OUT.#.exr [--window N]
 //                     [--colour LOW,HIGH] [--light-spread S] [--frames RANGE]
 #include <fmt/format.h>
@@ -13,7 +13,8 @@
 
 #include "common/cli.h"
 #include "common/sequence.h"
-#include "common/temporal_sequence.h"
+#include "dn/io/frame_pattern.h"
+#include "dn/temporal/sequence.h"
 
 using namespace dn;
 
@@ -22,8 +23,7 @@ int main(int argc, char** argv) {
     cli::Args args(argc, argv);
     std::vector<std::string> positional;
     std::string output, frames;
-    cli::TemporalSettings settings;
-    settings.enabled = true;
+    temporal::SequenceSettings settings;
     settings.filter.threads = static_cast<int>(std::thread::hardware_concurrency());
     while (!args.done()) {
       if (args.flag("-o")) {
@@ -51,22 +51,21 @@ int main(int argc, char** argv) {
     for (const auto& [n, path] : cli::sequenceFrames(noisy, frames, false, "temporal_refilter"))
       inputs.push_back(path), numbers.push_back(n);
     std::string why;
-    auto sequence = cli::TemporalSequence::plan({noisy}, inputs, settings, why);
+    auto sequence = temporal::Sequence::plan(noisy, inputs, settings, why);
     if (!sequence) throw IoError(noisy + ": " + (why.empty() ? "not a sequence" : why));
-    const cli::TemporalSequence::Read read = [](const std::string& path) {
+    const temporal::Sequence::Read read = [](const std::string& path) {
       ReadOptions only;
       only.only = {"color"};
       return readFrame(path, only);
     };
-    const cli::TemporalSequence::Denoise stored = [&](const std::string& path,
-                                                      const FrameBuffers&) {
+    const temporal::Sequence::Denoise stored = [&](const std::string& path, const FrameBuffers&) {
       DenoiseResult result;
-      result.color = readImage(cli::frameFile(alone, *cli::frameNumberOf(noisy, path)), 3);
+      result.color = readImage(frameFile(alone, *frameNumberOf(noisy, path)), 3);
       return result;
     };
     for (std::size_t i = 0; i < inputs.size(); ++i) {
       const DenoiseResult result = sequence->denoise(inputs[i], read(inputs[i]), read, stored);
-      writeImage(cli::frameFile(output, numbers[i]), result.color, false, {"R", "G", "B"});
+      writeImage(frameFile(output, numbers[i]), result.color, false, {"R", "G", "B"});
       fmt::print(stderr, "temporal_refilter: {}: {}\n", inputs[i], sequence->report());
     }
     return 0;

@@ -1,8 +1,9 @@
 # Install rules: `cmake --install build --prefix /opt/dn` gives the tools, their
 # docs, the shipped models, the libraries with their headers, a CMake package
 # (find_package(DiffusionDenoise) -> dn::tonemap, dn::ocio, dn::metrics,
-# dn::buffers, dn::io, dn::data, dn::infer, dn::denoise) and pkg-config files
-# (dn-tonemap, dn-metrics, dn-io, dn-denoise). Everything is relocatable: the
+# dn::buffers, dn::io, dn::data, dn::motion, dn::infer, dn::denoise,
+# dn::temporal) and pkg-config files (dn-tonemap, dn-metrics, dn-io,
+# dn-denoise, dn-temporal). Everything is relocatable: the
 # package files find the prefix from their own place. Built with
 # DN_WITH_OIIO=OFF: the libraries that build (dn::tonemap, dn::metrics,
 # dn::buffers, dn::infer), the CMake package and the models, no tools and no
@@ -23,6 +24,9 @@ if(DN_WITH_TORCH)
 endif()
 if(TARGET dn_core)
   list(APPEND dn_exports dn_core denoise)
+endif()
+if(TARGET dn_temporal)
+  list(APPEND dn_exports dn_temporal temporal)
 endif()
 set(dn_libraries)
 while(dn_exports)
@@ -70,7 +74,7 @@ if(TARGET dn_core)
   get_filename_component(DN_TORCH_LIBDIR "${TORCH_LIBRARY}" DIRECTORY)
   set(DN_TORCH_LINK "-Wl,--no-as-needed -ltorch -Wl,--as-needed -ltorch_cpu -lc10")
   set(DN_GLOO_LIBRARY "${GLOO_LIBRARY}")
-  list(APPEND dn_pkgconfig dn-denoise)
+  list(APPEND dn_pkgconfig dn-denoise dn-temporal)
 endif()
 foreach(pc ${dn_pkgconfig})
   configure_file(cmake/pkgconfig/${pc}.pc.in ${CMAKE_CURRENT_BINARY_DIR}/pkgconfig/${pc}.pc @ONLY)

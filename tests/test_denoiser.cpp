@@ -1,5 +1,5 @@
 // The from-scratch diffusion experiment behind the Denoiser
-// (dn/experiments/scratch_diffusion.h): sampling defaults adapted to the
+// (dn/infer/scratch_diffusion.h): sampling defaults adapted to the
 // input's sample count, and autoexposure.
 #include "doctest_torch.h"
 #include "tiny_models.h"
@@ -8,8 +8,8 @@
 
 #include <cmath>
 
-#include "dn/experiments/scratch_diffusion.h"
 #include "dn/infer/denoiser.h"
+#include "dn/infer/scratch_diffusion.h"
 
 using namespace dn;
 

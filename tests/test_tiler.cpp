@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "dn/infer/model_inputs.h"
 #include "dn/infer/tiler.h"
+#include "dn/nn/model_inputs.h"
 
 using namespace dn;
 

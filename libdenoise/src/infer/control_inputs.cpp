@@ -6,8 +6,8 @@
 
 #include <ATen/Parallel.h>
 
-#include "dn/infer/model_inputs.h"
 #include "dn/infer/oidn_filter.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/tonemap.h"
 
 namespace dn {
@@ -45,7 +45,7 @@ torch::Tensor cleanAux(const OidnBase& base, const torch::Tensor& albedo,
                        const torch::Tensor& normal) {
   const torch::Tensor unexposed = torch::ones({albedo.size(0)});
   auto clean = [&](const char* setName, const torch::Tensor& buffer) {
-    const OidnInputSet& set = oidnInputSet(setName);
+    const OidnInputSet set = oidnInputSet(setName);  // a copy: setName becomes a temporary string
     return oidnOutputDecode(runAligned(base->net(setName), oidnBaseInput(buffer, set, unexposed)),
                             set, 1.0f);
   };

@@ -4,8 +4,8 @@
 #include <stdexcept>
 #include <utility>
 
-#include "dn/experiments/scratch_diffusion.h"
 #include "dn/infer/oidn_pipeline.h"
+#include "dn/infer/scratch_diffusion.h"
 
 namespace dn {
 

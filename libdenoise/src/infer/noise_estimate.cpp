@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "dn/infer/model_inputs.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/tonemap.h"
 
 namespace dn {

@@ -9,8 +9,8 @@
 #include "dn/diffusion/refine.h"
 #include "dn/infer/control_inputs.h"
 #include "dn/infer/light_paths.h"
-#include "dn/infer/model_inputs.h"
 #include "dn/infer/noise_estimate.h"
+#include "dn/nn/model_inputs.h"
 
 namespace dn {
 
@@ -77,8 +77,8 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
     if (options.progress) o.progress = [&, k](double f) { options.progress((k + f) / runs); };
     return o;
   };
-  const OidnRunOptions albedoRun = next(), normalRun = next();  // in this order: progress
-  const OidnInputSet& set = oidnInputSet("hdr_calb_cnrm_large");
+  const OidnRunOptions albedoRun = next(), normalRun = next();   // in this order: progress
+  const OidnInputSet set = oidnInputSet("hdr_calb_cnrm_large");  // a copy: the name is a temporary
   OidnUNet net = base->net(set.name);
   net->to(options.device);
   if (!options.device.is_cpu() && !splitLightPaths) {

@@ -5,8 +5,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "dn/infer/model_inputs.h"
 #include "dn/nn/model_file.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/nn/nn_blocks.h"
 
 namespace dn {

@@ -23,4 +23,21 @@ torch::Tensor PriorDenoiser::forward(const torch::Tensor& z_t, const torch::Tens
   return prior_->predict(z_t, t, cond, nullptr);
 }
 
+torch::Tensor regressDirect(ConditionalDenoiser& model, const torch::Tensor& cond,
+                            const torch::Tensor& aux) {
+  return model.predict(cond, torch::zeros({cond.size(0)}), cond, aux);
+}
+
+torch::Tensor denoiseTonemapped(ConditionalDenoiser& model, const NoiseSchedule& schedule,
+                                Prediction prediction, const torch::Tensor& radiance,
+                                const torch::Tensor& aux, const SamplerOptions& options) {
+  model.eval();
+  const auto cond = modelSpaceFromTonemapped(radiance);
+  DenoiseFn fn = [&](const torch::Tensor& z_t, const torch::Tensor& t) {
+    return model.predict(z_t, t, cond, aux);
+  };
+  auto x0 = sample(schedule, prediction, fn, cond, options);
+  return tonemappedFromModelSpace(x0).clamp(0.0, 1.0);
+}
+
 }  // namespace dn

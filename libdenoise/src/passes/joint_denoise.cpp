@@ -4,10 +4,10 @@
 #include <cmath>
 
 #include "dn/infer/denoiser.h"
-#include "dn/infer/model_inputs.h"
 #include "dn/infer/oidn_pipeline.h"
 #include "dn/io/buffer_io.h"
 #include "dn/nn/model_file.h"
+#include "dn/nn/model_inputs.h"
 #include "dn/nn/oidn_control.h"
 
 namespace dn {

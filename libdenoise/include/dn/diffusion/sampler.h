@@ -9,7 +9,6 @@
 #include <torch/torch.h>
 
 #include "dn/diffusion/schedule.h"
-#include "dn/nn/prior.h"
 
 namespace dn {
 
@@ -56,16 +55,5 @@ torch::Tensor sample(const NoiseSchedule& schedule, Prediction prediction, const
 // The data range of the diffusion models is [-1, 1]; tonemapped images are [0, 1].
 inline torch::Tensor modelSpaceFromTonemapped(const torch::Tensor& x) { return x * 2.0 - 1.0; }
 inline torch::Tensor tonemappedFromModelSpace(const torch::Tensor& x) { return (x + 1.0) * 0.5; }
-
-// The regression ablation's single pass (model space): the network sees the
-// noisy render as both z_t and cond at timestep 0 and outputs x0 directly.
-torch::Tensor regressDirect(ConditionalDenoiser& model, const torch::Tensor& cond,
-                            const torch::Tensor& aux);
-
-// Denoises tonemapped renders (B,3,H,W) in [0,1] with aux buffers (B,C,H,W) or
-// an undefined tensor; returns the tonemapped result in [0,1].
-torch::Tensor denoiseTonemapped(ConditionalDenoiser& model, const NoiseSchedule& schedule,
-                                Prediction prediction, const torch::Tensor& radiance,
-                                const torch::Tensor& aux, const SamplerOptions& options);
 
 }  // namespace dn

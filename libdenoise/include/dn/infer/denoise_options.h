@@ -34,7 +34,7 @@ enum class Quality {
 // Quality by name ("fast", "balanced", "high"); std::nullopt for another name.
 std::optional<Quality> qualityFromName(const std::string& name);
 
-// The from-scratch diffusion model's sampling (dn/experiments/scratch_diffusion.h);
+// The from-scratch diffusion model's sampling (dn/infer/scratch_diffusion.h);
 // other models ignore it.
 struct ScratchSampling {
   std::string respacing;  // "" = the model's default (27 steps); "10" = 10 evenly spaced steps
@@ -95,7 +95,7 @@ struct DenoiseOptions {
 // The prefilter and light-path settings of a quality level.
 void setQuality(DenoiseOptions& options, Quality quality);
 
-// The from-scratch model's sampling plan (dn/experiments/scratch_diffusion.h).
+// The from-scratch model's sampling plan (dn/infer/scratch_diffusion.h).
 struct SamplingPlan {
   int64_t skip = 0;
   double meanMatchSigma = 2.0;

@@ -2,7 +2,7 @@
 // denoised HDR image out. The model file says which pipeline runs: the default
 // over OIDN's pretrained networks (dn/infer/oidn_pipeline.h), or the
 // from-scratch diffusion model kept as an experiment
-// (dn/experiments/scratch_diffusion.h).
+// (dn/infer/scratch_diffusion.h).
 #pragma once
 
 #include <memory>
@@ -10,10 +10,10 @@
 #include <vector>
 
 #include "dn/infer/denoise_options.h"
-#include "dn/infer/model_inputs.h"  // imageToTensor, tensorToImage
 #include "dn/infer/pipeline.h"
 #include "dn/io/buffers.h"
 #include "dn/nn/model_file.h"
+#include "dn/nn/model_inputs.h"  // imageToTensor, tensorToImage
 
 namespace dn {
 

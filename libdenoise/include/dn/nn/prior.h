@@ -1,7 +1,8 @@
 // Interfaces between the diffusion samplers/trainer and the networks. The frozen
 // base prior is a DenoisingPrior, so a larger pretrained pixel-space model can
 // replace the UNet trained here, as long as it exposes a trainable copy of its
-// encoder and accepts residuals on its skip features.
+// encoder and accepts residuals on its skip features. Also a ConditionalDenoiser
+// run through the samplers (dn/diffusion/sampler.h) or as one regression pass.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +10,8 @@
 #include <vector>
 
 #include <torch/torch.h>
+
+#include "dn/diffusion/sampler.h"
 
 namespace dn {
 
@@ -75,5 +78,16 @@ class PriorDenoiser : public ConditionalDenoiser {
  private:
   std::shared_ptr<DenoisingPrior> prior_;
 };
+
+// The regression ablation's single pass (model space): the network sees the
+// noisy render as both z_t and cond at timestep 0 and outputs x0 directly.
+torch::Tensor regressDirect(ConditionalDenoiser& model, const torch::Tensor& cond,
+                            const torch::Tensor& aux);
+
+// Denoises tonemapped renders (B,3,H,W) in [0,1] with aux buffers (B,C,H,W) or
+// an undefined tensor; returns the tonemapped result in [0,1].
+torch::Tensor denoiseTonemapped(ConditionalDenoiser& model, const NoiseSchedule& schedule,
+                                Prediction prediction, const torch::Tensor& radiance,
+                                const torch::Tensor& aux, const SamplerOptions& options);
 
 }  // namespace dn

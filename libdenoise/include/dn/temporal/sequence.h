@@ -1,0 +1,82 @@
+// Denoising a frame sequence with motion vectors: every frame denoised alone,
+// then filtered over time with its neighbours' results brought in along the
+// motion where they are trusted (dn/temporal/temporal_filter.h). A frame's
+// result depends only on the input frames within the window (read from disk
+// beyond the frames asked for), never on how the shot was split into runs.
+//
+//   dn::Denoiser denoiser = dn::Denoiser::fromFile("default.dnm");
+//   std::vector<std::string> files;  // e.g. from dn::patternFrames("shot.#.exr")
+//   std::string why;
+//   auto shot = dn::temporal::Sequence::plan("shot.#.exr", files, {}, why);
+//   for (const auto& file : files)  // shot is nullptr without motion vectors
+//     dn::writeImage(out, shot->denoise(file, denoiser, options).color, ...);
+#pragma once
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "dn/infer/denoiser.h"
+#include "dn/io/buffer_io.h"
+#include "dn/temporal/temporal_filter.h"
+
+namespace dn::temporal {
+
+struct SequenceSettings {
+  int radius = 4;          // neighbours on each side
+  std::string motion;      // motion vectors from separate files: a pattern (mv.#.exr)
+  ReadOptions read;        // the view layer and channel overrides
+  TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
+};
+
+class Sequence {
+ public:
+  using Read = std::function<FrameBuffers(const std::string& path)>;
+  // Denoises `frame`, which is the frame of file `path`.
+  using Denoise = std::function<DenoiseResult(const std::string& path, const FrameBuffers& frame)>;
+
+  // The plan for the frames `files` of `pattern` ("shot.#.exr"), or nullptr:
+  // no files, a file not of the pattern, or no motion vectors (then `why`
+  // says in one line that it denoises frame by frame). Throws
+  // std::invalid_argument when settings.motion is given but not a pattern.
+  static std::unique_ptr<Sequence> plan(const std::string& pattern,
+                                        const std::vector<std::string>& files,
+                                        const SequenceSettings& settings, std::string& why);
+
+  // The result of `file` (one of the planned files; `frame` as `read` gives
+  // it): denoised alone, its colour then filtered with the neighbours' results.
+  // Neighbours are read and denoised here as needed and kept while in the window.
+  DenoiseResult denoise(const std::string& file, const FrameBuffers& frame, const Read& read,
+                        const Denoise& denoise);
+  // The same with `denoiser`: each frame read with the buffers it needs.
+  DenoiseResult denoise(const std::string& file, const Denoiser& denoiser,
+                        const DenoiseOptions& options);
+
+  // How much of the last frame came from history.
+  const TemporalStats& lastStats() const { return lastStats_; }
+  int lastFrame() const { return lastNumber_; }
+  // The same in one line: "frame N: 40% from history (4 neighbours...)".
+  std::string report() const;
+
+ private:
+  struct Input;
+  Sequence(std::string pattern, std::map<std::string, int> numbers, SequenceSettings settings);
+  std::shared_ptr<Input> input(int number, const FrameBuffers* given, const Read& read);
+  // A frame's own estimate: denoised alone.
+  std::shared_ptr<const DenoiseResult> estimate(int number, const FrameBuffers* given,
+                                                const Read& read, const Denoise& denoise);
+  std::string fileOf(int number) const;
+  void forget(int number);
+
+  std::string pattern_;
+  std::map<std::string, int> numbers_;  // input file -> frame number
+  SequenceSettings settings_;
+  std::map<int, std::shared_ptr<Input>> inputs_;
+  std::map<int, std::shared_ptr<const DenoiseResult>> estimates_;
+  TemporalStats lastStats_;
+  int lastNumber_ = 0;
+};
+
+}  // namespace dn::temporal

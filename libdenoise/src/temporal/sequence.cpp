@@ -1,0 +1,179 @@
+#include "dn/temporal/sequence.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+
+#include "dn/io/frame_pattern.h"
+#include "dn/motion/motion.h"
+
+namespace fs = std::filesystem;
+
+namespace dn::temporal {
+
+// A frame as read: its guides and motion, its noisy colour and, once denoised
+// alone, its result. The buffers the model reads are dropped once denoised, so
+// a window of 1080p frames holds about 0.13 GB a frame, not the whole file.
+struct Sequence::Input {
+  FrameBuffers buffers;  // what the model reads, until denoised
+  WindowFrame frame;     // noisy, guides, motion; denoised
+};
+
+namespace {
+
+// The albedo, normal and depth of a frame file: the guides of reprojection.
+// Taken from the buffers already read where the model reads them (one
+// decoding of the file less), else read.
+motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
+                        const ReadOptions& base) {
+  ReadOptions read = base;
+  read.only = {"color"};
+  for (const auto& b : availableBuffers(path, base))
+    if ((b == "albedo" || b == "normal" || b == "depth") && !frame.has(b)) read.only.push_back(b);
+  const FrameBuffers extra = read.only.size() > 1 ? readFrame(path, read) : FrameBuffers();
+  auto guide = [&](const std::string& name) {
+    return frame.has(name) ? frame.get(name) : extra.has(name) ? extra.get(name) : Image();
+  };
+  motion::Guides g;
+  g.albedo = guide("albedo");
+  g.normal = guide("normal");
+  g.depth = guide("depth");
+  return g;
+}
+
+template <class Map>
+void keepWithin(Map& frames, int first, int last) {
+  for (auto it = frames.begin(); it != frames.end();)
+    it = (it->first < first || it->first > last) ? frames.erase(it) : std::next(it);
+}
+
+}  // namespace
+
+Sequence::Sequence(std::string pattern, std::map<std::string, int> numbers,
+                   SequenceSettings settings)
+    : pattern_(std::move(pattern)), numbers_(std::move(numbers)), settings_(std::move(settings)) {}
+
+std::unique_ptr<Sequence> Sequence::plan(const std::string& pattern,
+                                         const std::vector<std::string>& files,
+                                         const SequenceSettings& settings, std::string& why) {
+  why.clear();
+  if (files.empty()) return nullptr;
+  std::map<std::string, int> numbers;
+  for (const auto& file : files)
+    if (auto n = frameNumberOf(pattern, file)) numbers[file] = *n;
+  if (numbers.size() != files.size()) return nullptr;
+  const std::string& first = files.front();
+  if (!settings.motion.empty()) {
+    if (!isFramePattern(settings.motion))
+      throw std::invalid_argument("--motion " + settings.motion +
+                                  ": a sequence needs a motion pattern");
+  } else if (!motion::findMotionChannels(channelNames(first), settings.read.viewLayer)) {
+    why = first +
+          ": no motion vectors (Blender: the Vector pass, motion blur off; or --motion FILES); "
+          "denoising frame by frame";
+    return nullptr;
+  }
+  return std::unique_ptr<Sequence>(new Sequence(pattern, std::move(numbers), settings));
+}
+
+std::string Sequence::fileOf(int number) const {
+  const std::string path = frameFile(pattern_, number);
+  std::error_code ec;
+  return fs::exists(path, ec) ? path : std::string();
+}
+
+std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers* given,
+                                                 const Read& read) {
+  if (auto it = inputs_.find(number); it != inputs_.end()) return it->second;
+  const std::string path = fileOf(number);
+  if (path.empty()) return nullptr;
+  auto entry = std::make_shared<Input>();
+  // A given frame is denoised straight from the caller's buffers.
+  if (!given) entry->buffers = read(path);
+  const FrameBuffers& frame = given ? *given : entry->buffers;
+  entry->frame.noisy = frame.get("color");
+  entry->frame.guides = guidesOf(frame, path, settings_.read);
+  std::optional<motion::MotionField> field =
+      settings_.motion.empty()
+          ? motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer)
+          : motion::readMotion(frameFile(settings_.motion, number), frame.width, frame.height, "",
+                               true);
+  if (field) entry->frame.motion = std::move(*field);
+  inputs_[number] = entry;
+  return entry;
+}
+
+std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameBuffers* given,
+                                                        const Read& read, const Denoise& denoise) {
+  if (auto it = estimates_.find(number); it != estimates_.end()) return it->second;
+  auto self = input(number, given, read);
+  if (!self) return nullptr;
+  auto result =
+      std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
+  self->buffers = FrameBuffers();
+  self->frame.denoised = std::move(result->color);  // the filter's input, held once
+  return estimates_[number] = result;
+}
+
+void Sequence::forget(int number) {
+  // Memory stays bounded by the window: what lies behind it is dropped.
+  keepWithin(inputs_, number - settings_.radius, number + settings_.radius);
+  keepWithin(estimates_, number - settings_.radius, number + settings_.radius);
+}
+
+DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
+                                const Read& read, const Denoise& denoise) {
+  const int n = numbers_.at(file);
+  const int radius = settings_.radius;
+  forget(n);
+  lastNumber_ = n;
+  // The window's frames stay held by inputs_ until the next call's forget().
+  std::shared_ptr<const DenoiseResult> centre;
+  std::vector<const WindowFrame*> window;
+  for (int m = n - radius; m <= n + radius; ++m) {
+    auto result = estimate(m, m == n ? &frame : nullptr, read, denoise);
+    if (m == n) centre = result;
+    auto source = result ? this->input(m, nullptr, read) : nullptr;
+    const bool usable = source && source->frame.denoised.sameShape(frame.get("color"));
+    window.push_back(usable ? &source->frame : nullptr);
+  }
+  TemporalOptions options = settings_.filter;
+  options.radius = radius;
+  TemporalResult filtered = filterFrame(window, radius, options);
+  lastStats_ = filtered.stats;
+  DenoiseResult result = *centre;
+  result.color = std::move(filtered.color);
+  return result;
+}
+
+DenoiseResult Sequence::denoise(const std::string& file, const Denoiser& denoiser,
+                                const DenoiseOptions& options) {
+  const Read read = [&](const std::string& path) {
+    ReadOptions only = settings_.read;
+    only.only = denoiser.buffersToRead(availableBuffers(path, only), options);
+    return readFrame(path, only);
+  };
+  const Denoise alone = [&](const std::string&, const FrameBuffers& frame) {
+    return denoiser.denoise(frame, options);
+  };
+  return denoise(file, read(file), read, alone);
+}
+
+std::string Sequence::report() const {
+  const TemporalStats& s = lastStats_;
+  char line[400];
+  int n =
+      std::snprintf(line, sizeof line, "frame %d: %.0f%% from history (%d neighbour%s", lastNumber_,
+                    100 * s.historyShare, s.neighbours, s.neighbours == 1 ? "" : "s");
+  auto add = [&](const char* format, int count) {
+    if (count > 0 && n >= 0 && n < int(sizeof line))
+      n += std::snprintf(line + n, sizeof line - n, format, count);
+  };
+  add(", %d repeating its noise and left out", s.repeatedNoise);
+  add(", %d brought to its light first", s.relit);
+  add(", %d with the light changed over the frame and left out", s.changedLight);
+  return std::string(line) + ")";
+}
+
+}  // namespace dn::temporal
