@@ -38,7 +38,7 @@ SHOTS = {
     "room_dolly":      ("128x96", 1024, True),
     "room_pan":        ("128x96", 1024, True),
     "room_still":      ("128x96", 4096, False),
-    "fox_walk":        ("128x96", 1024, True),
+    "fox_walk":        ("128x96", 2048, True),
     "helmet_orbit":    ("128x96", 1024, True),
     "vase_handheld":   ("96x128", 1024, True),
     "toycar_pass":     ("128x96", 1024, True),
