@@ -22,6 +22,9 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+# The venv scripts/install.sh makes (bpy 5.0.1, numpy<2), or the one DN_BPY_VENV names.
+BPY_PYTHON = os.path.join(os.environ.get("DN_BPY_VENV") or os.path.normpath(os.path.join(HERE, "..", "..", "build-venv-bpy")),
+                          "bin", "python")
 SHOTS = ["room_dolly", "room_pan", "room_still", "fox_walk", "helmet_orbit", "vase_handheld", "toycar_pass",
          "truck_track", "lamp_swing", "sun_sweep", "glass_turntable", "texture_dolly"]
 
@@ -39,7 +42,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True)
     ap.add_argument("--shots", nargs="+", default=SHOTS, choices=SHOTS)
-    ap.add_argument("--python", default="/work/venv-bpy/bin/python", help="a Python with bpy 5")
+    ap.add_argument("--python", default=BPY_PYTHON, help="a Python with bpy 5 (default: %(default)s)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--check-frames", default="4", help="frames that also get ref2 ('' for none)")

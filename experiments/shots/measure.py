@@ -22,10 +22,8 @@ import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+from build_set import BPY_PYTHON, SHOTS  # noqa: E402
 from check_refs import combined, psnr  # noqa: E402
-
-SHOTS = ["room_dolly", "room_pan", "room_still", "fox_walk", "helmet_orbit", "vase_handheld", "toycar_pass",
-         "truck_track", "lamp_swing", "sun_sweep", "glass_turntable", "texture_dolly"]
 
 
 def main():
@@ -34,7 +32,7 @@ def main():
     ap.add_argument("--res", default="64x48")
     ap.add_argument("--spp", type=int, default=128)
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--python", default="/work/venv-bpy/bin/python")
+    ap.add_argument("--python", default=BPY_PYTHON, help="a Python with bpy 5 (default: %(default)s)")
     args = ap.parse_args()
     width, height = (int(v) for v in args.res.split("x"))
     listing = subprocess.run([args.python, os.path.join(HERE, "shots.py"), "--list"], capture_output=True,

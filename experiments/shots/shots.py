@@ -1,7 +1,7 @@
 """The held-out evaluation shots: twelve animated Blender 5 scenes of distinct designs.
 
 Run under a Python with the bpy module (PyPI bpy 5), one shot a call:
-  /work/venv-bpy/bin/python experiments/shots/shots.py --shot room_dolly --out /work/data/shots/room_dolly
+  build-venv-bpy/bin/python experiments/shots/shots.py --shot room_dolly --out /work/data/shots/room_dolly
   ... --res 64x48 --frames 1-1 --spp 16 --ref-spp 0      (a timing smoke test)
   ... --list                                             (the shots and their settings)
 build_set.py runs every shot; README.md says what each covers, SPLIT.md which
