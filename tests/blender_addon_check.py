@@ -18,6 +18,7 @@ import os
 import shutil
 import sys
 import time
+import tomllib
 import zipfile
 
 import numpy as np
@@ -92,8 +93,10 @@ def main():
     # The zip: manifest and package at its root, as Blender 4.2+ installs it.
     out = run([sys.executable, os.path.join(args.source, "blender", "build.py"), "--output-dir", work])
     zip_path = out.stdout.strip()
+    with open(os.path.join(args.source, "blender", "blender_manifest.toml"), "rb") as manifest:
+        version = tomllib.load(manifest)["version"]
     check("build.py builds build/dn_denoise-<version>.zip", out.returncode == 0 and
-          os.path.basename(zip_path) == "dn_denoise-0.1.0.zip", out.stderr)
+          os.path.basename(zip_path) == f"dn_denoise-{version}.zip", out.stderr)
     names = zipfile.ZipFile(zip_path).namelist()
     check("the zip holds the manifest and __init__.py at its root, not build.py",
           {"blender_manifest.toml", "__init__.py"} <= set(names) and "build.py" not in names, names)

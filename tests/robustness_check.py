@@ -155,8 +155,12 @@ def _csv_rows(out):
     return list(csv.reader(io.StringIO(out.stdout)))
 
 
+# The version --version must print: the one CMakeLists.txt gives the project.
+with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "CMakeLists.txt")) as _cmake:
+    PROJECT_VERSION = re.search(r"project\(\S+ VERSION (\S+)", _cmake.read()).group(1)
+
 CHECKS = {
-    "version": lambda f, o: ("0.1.0" in o.stdout and "OpenImageIO" in o.stdout, o.stdout),
+    "version": lambda f, o: (PROJECT_VERSION in o.stdout and "OpenImageIO" in o.stdout, o.stdout),
     "version_no_torch": lambda f, o: ("LibTorch" not in o.stdout, o.stdout),
     "no_cuda": lambda f, o: (len(o.stderr.strip().splitlines()) == 1, o.stderr),
     "provenance_dndenoise": lambda f, o: _provenance(os.path.join(f["w"], "out.exr"), "dndenoise", f, f["model"]),
