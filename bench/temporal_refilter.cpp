@@ -1,4 +1,4 @@
-// The temporal filter of `dndenoise --temporal on`, run over frames already
+// The temporal filter of `dndenoise --temporal filter`, run over frames already
 // denoised alone (`dndenoise --temporal off --float`), so that its settings
 // can be measured in seconds instead of re-denoising every frame. The same
 // code path as dndenoise (dn/temporal/sequence.h), with the "denoiser"

@@ -4,19 +4,18 @@
   python3 experiments/temporal_eval.py --data /work/data/temporal --out /work/data/temporal/eval \
       --dndenoise build/bin/dndenoise --dnmetrics build/bin/dnmetrics \
       --refilter build/bin/temporal_refilter --model models/default.dnm \
-      --scenes still object pan light --spp 4 16 [--window 4] [--threads 2] \
-      [--extra on]
+      --scenes still object pan light --spp 4 16 [--window 4] [--threads 2]
 
 For each scene folder (experiments/render_sequences.py: spp<N>.<frame>.exr, and
 ref.<frame>.exr or one ref.exr for a locked-off shot; at most 8 frames) and
 each --spp, denoises the sequence these ways:
   fbf        dndenoise --temporal off --float (the default model, every frame alone)
-  temporal   the temporal filter of dndenoise --temporal on over the fbf frames
-             (bench/temporal_refilter: the same code, without denoising again)
+  filter     the temporal filter alone (dndenoise --temporal filter) over the fbf
+             frames (bench/temporal_refilter: the same code, without denoising again)
+  temporal   dndenoise --float, the default (--temporal on): the filter, and
+             the noisy renders accumulated the same way and denoised again
   oidn       OIDN 2.x per frame, its usual call (experiments/oidn_denoise.py)
   prefilter  OIDN's prefilter mode per frame (oidn_denoise.py --prefilter)
-  --extra M  dndenoise --temporal M --float in full (on: to check that it writes
-             what temporal_refilter gives, and its time against fbf's)
 and scores each with dnmetrics (PSNR, FLIP per frame, flicker of the error),
 and with FovVideoVDP as a 24 fps video where --fvvdp-python names an
 interpreter that has pyfvvdp (dnmetrics --fvvdp; JOD, higher is better).
@@ -35,7 +34,7 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-METHODS = ("fbf", "temporal", "oidn", "prefilter")
+METHODS = ("fbf", "filter", "temporal", "oidn", "prefilter")
 
 
 def run(cmd, log=None):
@@ -62,7 +61,7 @@ def denoise(args, scene, spp, method, out):
     os.makedirs(target, exist_ok=True)
     done = glob.glob(os.path.join(target, "*.exr"))
     threads = ["--threads", str(args.threads)] if args.threads else []
-    if method == "temporal":  # always: it is quick, and its settings are what is measured
+    if method == "filter":  # always: it is quick, and its settings are what is measured
         cmd = [args.refilter, pattern, os.path.join(out, "fbf", f"spp{spp}.#.exr"), "-o",
                os.path.join(target, f"spp{spp}.#.exr"), "--window", str(args.window),
                "--frames", f"1-{last}"]
@@ -76,7 +75,7 @@ def denoise(args, scene, spp, method, out):
     if method in ("oidn", "prefilter"):
         cmd = [sys.executable, os.path.join(HERE, "oidn_denoise.py"), *frames, "-o", target + "/"] + threads
         return run(cmd + (["--prefilter"] if method == "prefilter" else []))[0]
-    mode = "off" if method == "fbf" else method
+    mode = "off" if method == "fbf" else "on"
     cmd = [args.dndenoise, "--model", args.model, pattern, "-o", os.path.join(target, f"spp{spp}.#.exr"),
            "--rgb-only", "--float", "--temporal", mode, "--window", str(args.window), "-v",
            "--frames", f"1-{last}"] + threads
@@ -119,7 +118,6 @@ def main():
     ap.add_argument("--colour", default="", help="LOW,HIGH: the colour test's thresholds")
     ap.add_argument("--fvvdp-python", default="", help="an interpreter with pyfvvdp: also FovVideoVDP")
     ap.add_argument("--light-spread", default="", help="the spread above which a neighbour is left out")
-    ap.add_argument("--extra", nargs="*", default=[], choices=["on"])
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
     ap.add_argument("--window", type=int, default=4)
@@ -135,7 +133,7 @@ def main():
         for spp in args.spp:
             out = os.path.join(args.out, scene, f"spp{spp}")
             os.makedirs(out, exist_ok=True)
-            methods = list(METHODS) + args.extra
+            methods = list(METHODS)
             times = {m: denoise(args, scene, spp, m, out) for m in methods}
             scores = {m: score(args, scene, spp, m, out) for m in methods}
             worst = {m: min(t - f for t, f in zip(scores[m]["psnr"], scores["fbf"]["psnr"])) for m in methods}
@@ -148,7 +146,7 @@ def main():
                 note = ""
                 if m in shares:
                     note = f"worst frame {worst[m]:+.2f} dB vs fbf; {mean(shares[m]):.0f}% from history"
-                    if times.get("fbf") and times.get(m) and m != "temporal":
+                    if times.get("fbf") and times.get(m) and m != "filter":
                         note += f"; time x{times[m] / times['fbf']:.2f} of fbf"
                 jod = f" {s['fvvdp']:.3f} |" if s["fvvdp"] is not None else ""
                 print(f"| {scene} | {spp} | {m} | {mean(s['psnr']):.2f} | {mean(s['flip']):.4f} | "

@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """dndenoise on a sequence with motion vectors (testdata/sequence, made by
 experiments/render_sequences.py --scene object): the neighbours are
-used by default (--temporal on), -v says per frame how much came from history, a frame's result does
+used by default (--temporal on), their noisy renders accumulated and denoised
+again unless --temporal filter, -v says per frame how much came from history
+and over how many frames the render was accumulated, a frame's result does
 not depend on how the shot was split into runs (bit-identical pixels), and a
 sequence without motion vectors is denoised frame by frame with one line
 saying so. Also dnmetrics on the sequences (per-frame rows, flicker).
@@ -57,6 +59,7 @@ def main():
     check(len(lines) == len(FRAMES), f"-v reports history for each of the {len(FRAMES)} frames")
     check("frame 1: " in lines[0] and "(2 neighbours" in lines[0], "the first frame has a one-sided window")
     check("(4 neighbours" in lines[2], "a middle frame has two neighbours on each side")
+    check(all("accumulated over" in l for l in lines), "-v says over how many frames each render was accumulated")
     # Two runs, 1-3 and 4-6, write the same bits as one run over 1-6.
     run(base + ["-o", os.path.join(work, "split.#.exr"), "--frames", "1-3"])
     run(base + ["-o", os.path.join(work, "split.#.exr"), "--frames", "4-6"])
@@ -69,8 +72,13 @@ def main():
     run(plain + ["-o", os.path.join(work, "default.#.exr")])
     run(plain + ["-o", os.path.join(work, "on.#.exr"), "--temporal", "on"])
     run(plain + ["-o", os.path.join(work, "alone.#.exr"), "--temporal", "off"])
+    filtered = run(plain + ["-o", os.path.join(work, "filter.#.exr"), "--temporal", "filter", "-v"])
+    check(not any("accumulated over" in l for l in filtered.stderr.splitlines()),
+          "--temporal filter: no render accumulated")
     frames = {name: [read_rgb(os.path.join(work, f"{name}.{n:04d}.exr")) for n in FRAMES]
-              for name in ("whole", "default", "on", "alone")}
+              for name in ("whole", "default", "on", "alone", "filter")}
+    check(all(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["filter"])),
+          "the default denoises the accumulated renders too (not the same as --temporal filter)")
     check(all(np.array_equal(a, b) for a, b in zip(frames["default"], frames["on"])),
           "the default uses the neighbours (= --temporal on)")
     check(all(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["alone"])) and

@@ -4,6 +4,7 @@
 // temporal filter on synthetic frames with known shifts and an occluder.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <random>
@@ -374,6 +375,56 @@ TEST_CASE("temporal filter: independent leftovers average down; repeated noise d
   std::vector<const temporal::WindowFrame*> edge = {&frames[0], &frames[1], nullptr, &frames[3]};
   CHECK(temporal::filterFrame(edge, 0).stats.neighbours == 1);
   CHECK(temporal::filterFrame(edge, 3).stats.neighbours == 0);
+}
+
+TEST_CASE("temporal filter: the noisy renders accumulate with its weights, variance over frames") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 500, 600);
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 2);
+  REQUIRE(r.history.sameShape(truth.color));
+  // Every neighbour trusted nearly everywhere: close to 5 frames a pixel.
+  CHECK(r.stats.accumulatedFrames > 4.0);
+  CHECK(r.stats.accumulatedFrames <= 5.0);
+  // The render's noise variance (0.1^2) falls by the effective frame count.
+  const std::vector<float>& counts = r.historyFrames.pixels;
+  CHECK(*std::min_element(counts.begin(), counts.end()) >= 1.0f);
+  double expected = 0.0;
+  for (float n : counts) expected += 0.01 / n / counts.size();
+  const double measured = meanSquaredError(r.history, truth.color);
+  CHECK(measured > 0.8 * expected);
+  CHECK(measured < 1.25 * expected);
+
+  // Repeated noise adds no sample: the history is the frame's render itself.
+  std::vector<temporal::WindowFrame> repeated(5, stillFrame(truth, 7, 8));
+  const temporal::TemporalResult same = temporal::filterFrame(windowOf(repeated), 2);
+  CHECK(same.stats.accumulatedFrames == 1.0);
+  CHECK(same.history.pixels == repeated[2].noisy.pixels);
+}
+
+TEST_CASE("temporal filter: a moving shadow stays out of the accumulated render") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 700, 800);
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 12; ++x)
+      for (int c = 0; c < 3; ++c) {
+        frames[2].denoised.at(x, y, c) *= 0.25f;
+        frames[2].noisy.at(x, y, c) *= 0.25f;
+      }
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
+  double history = 0.0, light = 0.0;
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 12; ++x) history += r.history.at(x, y, 1), light += truth.color.at(x, y, 1);
+  CHECK(history / light > 0.95);  // a blind average: 0.75
+}
+
+TEST_CASE("temporal filter: the two estimates blend by the accumulated share") {
+  Image filtered(2, 1, 3, 1.0f), accumulated(2, 1, 3, 3.0f);
+  accumulated.at(1, 0, 2) = 5.0f;
+  const Image half = temporal::blendWithHistory(filtered, accumulated, 0.5);
+  CHECK(half.at(0, 0, 0) == 2.0f);
+  CHECK(half.at(1, 0, 2) == 3.0f);
+  CHECK(temporal::blendWithHistory(filtered, accumulated, 0.0).pixels == filtered.pixels);
+  CHECK_THROWS_AS(temporal::blendWithHistory(filtered, Image(1, 1, 3), 0.5), std::invalid_argument);
 }
 
 TEST_CASE("temporal filter: a visible sun does not hide the rest of the frame") {

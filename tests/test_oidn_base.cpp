@@ -345,10 +345,28 @@ TEST_CASE("the prefilter mode agrees with OIDN's: aux denoised first, then the c
     CHECK(out.exposure == 1.0f);  // aux buffers are not exposed
     checkAgreesWithOidn(tensorToImage(out.image), set);
   }
-  const DenoiseResult result = Denoiser::fromFile(kModel).denoise(frame, {});
+  const Denoiser denoiser = Denoiser::fromFile(kModel);
+  const DenoiseResult result = denoiser.denoise(frame, {});
   CHECK(result.prefiltered);  // the default with albedo and normal
   CHECK(result.steps == 3);
   checkAgreesWithOidn(result.color, "prefiltered");
+  checkAgreesWithOidn(result.cleanAlbedo, "alb");
+  checkAgreesWithOidn(result.cleanNormal, "nrm");
+
+  // Denoised again with the aux it cleaned (a sequence's accumulated render):
+  // one network, the default-size one for albedo and normal, on them as given.
+  FrameBuffers again = frame;
+  again.buffers["albedo"] = result.cleanAlbedo;
+  again.buffers["normal"] = result.cleanNormal;
+  again.auxPrefiltered = true;
+  const DenoiseResult second = denoiser.denoise(again, {});
+  CHECK_FALSE(second.prefiltered);
+  CHECK(second.steps == 1);
+  CHECK(second.buffersUsed == oidnInputSet("hdr_alb_nrm").buffers);
+  again.auxPrefiltered = false;
+  DenoiseOptions asGiven;
+  asGiven.prefilter = false;
+  CHECK(second.color.pixels == denoiser.denoise(again, asGiven).color.pixels);
 }
 
 TEST_CASE("bfloat16 convolutions stay near OIDN's result, and float is restored bit for bit") {

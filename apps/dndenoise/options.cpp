@@ -32,7 +32,8 @@ about the time OIDN takes in that mode. Where the networks leave correlated
 noise (a pixel filter that splats samples), the Control Module, fed the
 buffers OIDN ignores, steers them with diffusion refinement. -q high adds the
 light-path split. On a frame sequence with motion vectors, each frame's
-result is averaged with its neighbours' where they agree (--temporal).
+result is averaged with its neighbours' where they agree, and so is its noisy
+render before a second denoising (--temporal).
 Multilayer EXRs from Blender/Cycles and other renderers' usual channel names
 are read as they are; the result is added as a layer beside every input layer
 and the input's metadata (or written alone with --rgb-only).
@@ -81,11 +82,15 @@ output:
                       pattern's range, else the files found); a missing frame stops
                       the run with a line for each
   --skip-missing      denoise the frames that exist, after naming the missing ones
-  --temporal on|off   sequences with motion vectors (Blender's Vector pass, motion
+  --temporal on|filter|off
+                      sequences with motion vectors (Blender's Vector pass, motion
                       blur off; Arnold/Karma motionvector, V-Ray VRayVelocity,
                       RenderMan motionBack/Fore): on (the default) averages each
                       frame's result with its neighbours' where the motion, the
-                      features and the light agree; off: every frame alone
+                      features and the light agree, accumulates their noisy
+                      renders the same way, denoises that too and takes the mean
+                      of the two; filter: the average of results alone (one
+                      network pass a frame, not two); off: every frame alone
   --window N          neighbours on each side for --temporal, 1-8 (default 4)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
@@ -281,8 +286,11 @@ Options parseArgs(int argc, char** argv) {
       o.skipMissing = true;
     } else if (args.flag("--temporal")) {
       const std::string v = args.value("--temporal");
-      if (v != "on" && v != "off") throw cli::UsageError("--temporal must be on or off, got " + v);
-      o.temporal = v == "on";
+      if (v != "on" && v != "filter" && v != "off")
+        throw cli::UsageError("--temporal must be on, filter or off, got " + v);
+      o.temporal = v != "off";
+      o.sequence.filter.accumulatedShare =
+          v == "filter" ? 0.0 : temporal::TemporalOptions().accumulatedShare;
     } else if (args.flag("--window")) {
       o.sequence.radius = args.intValue("--window", 1, 8);
     } else if (args.flag("--motion")) {

@@ -43,8 +43,8 @@ struct Options {
   bool listViews = false;
   bool passes = false;                      // --passes
   std::vector<GivenOption> given;           // options that act on some models only
-  bool temporal = true;                     // --temporal on|off
-  dn::temporal::SequenceSettings sequence;  // --window, --motion
+  bool temporal = true;                     // --temporal on|filter; off: false
+  dn::temporal::SequenceSettings sequence;  // --window, --motion, --temporal filter
 };
 
 // The options of the command line; -h, --version and --list-views print and exit.

@@ -1,6 +1,7 @@
 // sequence PATTERN FRAMES OUT_PATTERN: denoises the frames FRAMES (e.g. 1-3)
 // of a shot with motion vectors through the installed dn::temporal, each frame
-// filtered with its neighbours' results, and writes each result as float RGB
+// filtered with its neighbours' results and their noisy renders accumulated and
+// denoised again (the defaults), and writes each result as float RGB
 // to OUT_PATTERN. Prints "frame N history H neighbours K" per frame.
 #include <cstdio>
 #include <exception>

@@ -61,7 +61,8 @@ FrameBuffers withCleanAux(const OidnBase& base, const FrameBuffers& frame,
 // its errors on the whole, so the mean gains more (docs/dndenoise.md#light-paths).
 // Each network run is an equal share of the progress.
 OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame,
-                                 const OidnRunOptions& options, bool splitLightPaths) {
+                                 const OidnRunOptions& options, bool splitLightPaths,
+                                 FrameBuffers* clean) {
   const int runs = splitLightPaths ? 6 : 3;
   // The images held beside the networks' activations come out of the memory
   // budget (a 4K frame peaked at 4.2 GB without this): the colour and the
@@ -87,10 +88,16 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
     OidnRunOptions colourRun = next();
     colourRun.onDevice["albedo"] = cleanedAuxTensor(base, "alb", frame, albedoRun).squeeze(0);
     colourRun.onDevice["normal"] = cleanedAuxTensor(base, "nrm", frame, normalRun).squeeze(0);
+    if (clean) {
+      clean->buffers["albedo"] = tensorToImage(colourRun.onDevice["albedo"].unsqueeze(0));
+      clean->buffers["normal"] = tensorToImage(colourRun.onDevice["normal"].unsqueeze(0));
+    }
     return runOidn(net, set, frame, colourRun);
   }
-  const FrameBuffers clean = withCleanAux(base, frame, albedoRun, normalRun);
-  OidnRunResult whole = runOidn(net, set, clean, next());
+  const FrameBuffers cleaned = withCleanAux(base, frame, albedoRun, normalRun);
+  if (clean)
+    for (const char* aux : {"albedo", "normal"}) clean->buffers[aux] = cleaned.get(aux);
+  OidnRunResult whole = runOidn(net, set, cleaned, next());
   if (!splitLightPaths) return whole;
 
   FrameBuffers part;
@@ -98,11 +105,11 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
   part.height = frame.width;
   part.buffers["albedo"] = transposed(frame.get("diffuse_color"));
   part.buffers["albedo"] = cleanedAux(base, "alb", part, next());
-  part.buffers["normal"] = transposed(clean.get("normal"));
+  part.buffers["normal"] = transposed(cleaned.get("normal"));
   LightPathSplit split = splitDiffuse(frame);  // each part freed once transposed
   part.buffers["color"] = transposed(std::exchange(split.diffuse, Image()));
   const torch::Tensor diffuse = runOidn(net, set, part, next()).image;
-  part.buffers["albedo"] = transposed(clean.get("albedo"));
+  part.buffers["albedo"] = transposed(cleaned.get("albedo"));
   part.buffers["color"] = transposed(std::exchange(split.rest, Image()));
   const torch::Tensor rest = runOidn(net, set, part, next()).image;
   whole.image = 0.5 * (whole.image + (diffuse + rest).transpose(2, 3));
@@ -198,11 +205,18 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   run.progress = options.progress;
   auto [net, set] = base_->pick(frame.names());
   DenoiseResult result;
-  result.prefiltered = options.prefilter && base_->canPrefilter() && set->buffers.size() == 3;
+  // A second denoising of a frame whose aux the first cleaned (a sequence's
+  // accumulated render) runs the default-size network on them, not the large
+  // one: about half its time.
+  result.prefiltered = options.prefilter && base_->canPrefilter() && set->buffers.size() == 3 &&
+                       !frame.auxPrefiltered;
   result.lightPathsSplit = result.prefiltered && options.lightPaths && hasDiffusePasses(frame);
   OidnRunResult out;
   if (result.prefiltered) {
-    out = runOidnPrefiltered(base_, frame, run, result.lightPathsSplit);
+    FrameBuffers clean;
+    out = runOidnPrefiltered(base_, frame, run, result.lightPathsSplit, &clean);
+    result.cleanAlbedo = std::move(clean.buffers.at("albedo"));
+    result.cleanNormal = std::move(clean.buffers.at("normal"));
   } else {
     net->to(options.device);
     out = runOidn(net, *set, frame, run);

@@ -18,6 +18,8 @@ namespace dn::temporal {
 struct Sequence::Input {
   FrameBuffers buffers;  // what the model reads, until denoised
   WindowFrame frame;     // noisy, guides, motion; denoised
+  Image cleanAlbedo;     // the prefilter's, for denoising the frame's history
+  Image cleanNormal;
 };
 
 namespace {
@@ -40,6 +42,20 @@ motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
   g.normal = guide("normal");
   g.depth = guide("depth");
   return g;
+}
+
+// The frame with its colour replaced by the accumulated render, and its
+// albedo and normal by the prefilter's where its first denoising cleaned them.
+FrameBuffers withHistory(const FrameBuffers& frame, Image history, const Image& cleanAlbedo,
+                         const Image& cleanNormal) {
+  FrameBuffers out = frame;
+  out.buffers["color"] = std::move(history);
+  if (!cleanAlbedo.empty() && !cleanNormal.empty()) {
+    out.buffers["albedo"] = cleanAlbedo;
+    out.buffers["normal"] = cleanNormal;
+    out.auxPrefiltered = true;
+  }
+  return out;
 }
 
 template <class Map>
@@ -113,6 +129,8 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
       std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
   self->buffers = FrameBuffers();
   self->frame.denoised = std::move(result->color);  // the filter's input, held once
+  self->cleanAlbedo = std::move(result->cleanAlbedo);
+  self->cleanNormal = std::move(result->cleanNormal);
   return estimates_[number] = result;
 }
 
@@ -144,6 +162,12 @@ DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& fra
   lastStats_ = filtered.stats;
   DenoiseResult result = *centre;
   result.color = std::move(filtered.color);
+  if (options.accumulatedShare > 0.0 && filtered.stats.accumulatedFrames > 1.0) {
+    const Input& self = *inputs_.at(n);
+    const DenoiseResult history = denoise(
+        file, withHistory(frame, std::move(filtered.history), self.cleanAlbedo, self.cleanNormal));
+    result.color = blendWithHistory(result.color, history.color, options.accumulatedShare);
+  }
   return result;
 }
 
@@ -173,7 +197,13 @@ std::string Sequence::report() const {
   add(", %d repeating its noise and left out", s.repeatedNoise);
   add(", %d brought to its light first", s.relit);
   add(", %d with the light changed over the frame and left out", s.changedLight);
-  return std::string(line) + ")";
+  std::string out = std::string(line) + ")";
+  if (settings_.filter.accumulatedShare > 0.0 && s.accumulatedFrames > 1.0) {
+    std::snprintf(line, sizeof line, "; its render accumulated over %.1f frames, denoised again",
+                  s.accumulatedFrames);
+    out += line;
+  }
+  return out;
 }
 
 }  // namespace dn::temporal

@@ -237,6 +237,7 @@ Centre centreOf(const WindowFrame& frame) {
 struct Contribution {
   enum class Verdict { Used, Relit, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
   Image image;
+  Image positions;  // where each pixel of the frame is in the neighbour
   std::vector<double> weight;
   double spread = 0.0;  // of its differences from the frame's result, in local noise levels
 };
@@ -265,6 +266,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     return out;
   }
   out.image = std::move(moved.image);
+  out.positions = positions;
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
   // Where the light changed over most of the frame (a moving lamp), the
   // differences' own spread is large too, and shading changes too faint for
@@ -369,6 +371,40 @@ void forEach(std::size_t count, int threads, const std::function<void(std::size_
   if (failure) std::rethrow_exception(failure);
 }
 
+// The frame's noisy render and its neighbours', each neighbour's brought in
+// at the nearest pixel (resampling would correlate the noise, which the
+// network then leaves as blotches) with the weights its result got. A relit
+// neighbour's render is left out: its light is not the frame's. Also the
+// effective number of frames per pixel, (sum w)^2 / sum w^2: the accumulated
+// render's variance is the frame's over that.
+void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowFrame*>& frames,
+                     const std::vector<Contribution>& contributions, TemporalResult& result) {
+  const std::size_t n = current.noisy.pixelCount();
+  std::vector<double> sum(current.noisy.pixels.begin(), current.noisy.pixels.end());
+  std::vector<double> weight(n, 1.0), squares(n, 1.0);
+  for (std::size_t k = 0; k < contributions.size(); ++k) {
+    const Contribution& c = contributions[k];
+    if (c.weight.empty() || c.verdict == Contribution::Verdict::Relit) continue;
+    const Image moved = motion::reprojectNearest(frames[k]->noisy, c.positions);
+    for (std::size_t i = 0; i < n; ++i) {
+      const double w = c.weight[i];
+      if (w <= 0.0) continue;
+      weight[i] += w, squares[i] += w * w;
+      for (int ch = 0; ch < 3; ++ch) sum[3 * i + ch] += w * moved.pixels[3 * i + ch];
+    }
+  }
+  result.history = Image(current.noisy.width, current.noisy.height, 3);
+  result.historyFrames = Image(current.noisy.width, current.noisy.height, 1);
+  double total = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int ch = 0; ch < 3; ++ch)
+      result.history.pixels[3 * i + ch] = static_cast<float>(sum[3 * i + ch] / weight[i]);
+    result.historyFrames.pixels[i] = static_cast<float>(weight[i] * weight[i] / squares[i]);
+    total += result.historyFrames.pixels[i];
+  }
+  result.stats.accumulatedFrames = total / std::max<std::size_t>(1, n);
+}
+
 }  // namespace
 
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
@@ -419,10 +455,23 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
         std::count_if(k.weight.begin(), k.weight.end(), [](double w) { return w > 0.0; });
     result.stats.trusted.push_back(double(used) / mean.weight.size());
   }
+  std::vector<const WindowFrame*> frames;
+  for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
+  accumulateNoisy(current, frames, contributions, result);
   double share = 0.0;
   for (double w : mean.weight) share += 1.0 - 1.0 / w;
   result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());
   return result;
+}
+
+Image blendWithHistory(const Image& filtered, const Image& accumulated, double share) {
+  if (!filtered.sameShape(accumulated))
+    throw std::invalid_argument("blendWithHistory: the images differ in shape");
+  Image out = filtered;
+  for (std::size_t i = 0; i < out.pixels.size(); ++i)
+    out.pixels[i] =
+        static_cast<float>((1.0 - share) * filtered.pixels[i] + share * accumulated.pixels[i]);
+  return out;
 }
 
 }  // namespace dn::temporal

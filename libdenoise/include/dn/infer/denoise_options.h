@@ -115,8 +115,11 @@ struct DenoiseResult {
   bool steered = false;                  // a Control Module steered the base
   bool prefiltered = false;              // albedo and normal were denoised first
   bool lightPathsSplit = false;          // the diffuse part was denoised apart too
-  std::optional<NoiseLeft> noiseLeft;    // by the base, when a Control Module could steer it
-  std::optional<SamplingPlan> plan;      // the from-scratch model's
+  // Prefiltered: the albedo and normal as the colour network saw them, to
+  // denoise the frame again without cleaning them again (FrameBuffers::auxPrefiltered).
+  Image cleanAlbedo, cleanNormal;
+  std::optional<NoiseLeft> noiseLeft;  // by the base, when a Control Module could steer it
+  std::optional<SamplingPlan> plan;    // the from-scratch model's
 };
 
 // Throws std::invalid_argument naming both when `requested` (0: automatic) is

@@ -27,9 +27,11 @@ namespace dn {
 FrameBuffers withCleanAux(const OidnBase& base, const FrameBuffers& frame,
                           const OidnRunOptions& albedoRun, const OidnRunOptions& normalRun);
 
-// Steps 2 and 3: the prefilter mode, with the light-path split when asked.
+// Steps 2 and 3: the prefilter mode, with the light-path split when asked;
+// the cleaned albedo and normal go to `clean` where given.
 OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame,
-                                 const OidnRunOptions& options, bool splitLightPaths);
+                                 const OidnRunOptions& options, bool splitLightPaths,
+                                 FrameBuffers* clean = nullptr);
 
 class OidnPipeline : public Pipeline {
  public:

@@ -67,6 +67,11 @@ struct FrameBuffers {
   // Samples per pixel the renderer recorded in the file (Cycles writes
   // "cycles.<view layer>.samples"); 0 when unknown.
   int samplesPerPixel = 0;
+  // The albedo and normal are the prefilter's already (DenoiseResult's
+  // cleanAlbedo and cleanNormal of the same frame): a second, cheaper
+  // denoising of the frame (its render accumulated over time) runs one network
+  // on them, not the prefilter mode's three.
+  bool auxPrefiltered = false;
   // Buffers of the source left out of the first read, and how to read them
   // (dn/io/buffer_io.h sets both): a pipeline reads what only one of its paths
   // needs when it takes that path, e.g. the Control Module's extra buffers.

@@ -2,6 +2,10 @@
 // neighbours' results brought into it along the motion, where they are trusted.
 // Each frame's leftover error (blotches) changes with the noise seed, so the
 // average of trusted neighbours removes part of it and most of the flicker.
+// What every frame's network misses alike (a faint bounce of light, glossy
+// detail) no average of results brings back; the noisy renders, accumulated
+// with the same weights, hold it. Denoised once more, that estimate has errors
+// of its own, and the mean of the two beats either (blendWithHistory).
 #pragma once
 
 #include <string>
@@ -58,21 +62,30 @@ struct TemporalOptions {
   // Noise residuals correlated above this with the frame's: the neighbour
   // repeats the frame's noise (a fixed seed on a still camera) and adds nothing.
   double repeatedNoiseCorrelation = 0.5;
+  // The share of the accumulated render, denoised, in the result
+  // (blendWithHistory); 0: the filtered results alone, one network pass a
+  // frame. Chosen on the tuning half of experiments/shots/SPLIT.md (its
+  // denoising the default-size network on the prefilter's aux): 0.3 to 0.4
+  // within 0.02 dB at 4 and 16 spp, 0.5 0.04-0.07 dB less, 0.6 0.1-0.16 less.
+  double accumulatedShare = 0.35;
   int threads = 1;  // neighbours brought in at once; the result does not depend on it
 };
 
 // What one frame took from its neighbours, for -v.
 struct TemporalStats {
-  double historyShare = 0.0;    // mean over pixels of the neighbours' share of the weight
-  int neighbours = 0;           // neighbours available in the window
-  int repeatedNoise = 0;        // of them, rejected for repeating the frame's noise
-  int relit = 0;                // of them, brought to the frame's light first
-  int changedLight = 0;         // of them, rejected for a change of light over the frame
-  std::vector<double> trusted;  // per neighbour: share of pixels it contributed to
+  double historyShare = 0.0;       // mean over pixels of the neighbours' share of the weight
+  int neighbours = 0;              // neighbours available in the window
+  int repeatedNoise = 0;           // of them, rejected for repeating the frame's noise
+  int relit = 0;                   // of them, brought to the frame's light first
+  int changedLight = 0;            // of them, rejected for a change of light over the frame
+  std::vector<double> trusted;     // per neighbour: share of pixels it contributed to
+  double accumulatedFrames = 1.0;  // mean over pixels of the frames in the accumulated render
 };
 
 struct TemporalResult {
-  Image color;
+  Image color;          // the filtered results
+  Image history;        // the noisy renders accumulated with the same weights
+  Image historyFrames;  // per pixel, the effective number of frames in `history`
   TemporalStats stats;
 };
 
@@ -81,5 +94,10 @@ struct TemporalResult {
 // the frame itself. Deterministic: depends only on the frames given.
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
                            const TemporalOptions& options = {});
+
+// (1 - share) filtered + share accumulated, per pixel: `accumulated` is
+// TemporalResult::history denoised. Where no neighbour was trusted the history
+// is the frame's own render, so both are the frame denoised alone.
+Image blendWithHistory(const Image& filtered, const Image& accumulated, double share);
 
 }  // namespace dn::temporal
