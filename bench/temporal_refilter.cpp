@@ -25,6 +25,8 @@ int main(int argc, char** argv) {
     std::string output, frames;
     temporal::SequenceSettings settings;
     settings.filter.threads = static_cast<int>(std::thread::hardware_concurrency());
+    // The results are read, not denoised: the filter alone (dndenoise --temporal filter).
+    settings.filter.accumulatedShare = 0.0;
     while (!args.done()) {
       if (args.flag("-o")) {
         output = args.value("-o");
