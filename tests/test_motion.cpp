@@ -509,6 +509,11 @@ TEST_CASE("temporal filter: a neighbour whose light changed over the frame is re
   for (std::size_t i = 1; i < r.color.pixels.size(); i += 3)
     result += r.color.pixels[i], light += truth.color.pixels[i];
   CHECK(result / light == doctest::Approx(1.0).epsilon(0.01));
+  // Their renders are accumulated at the frame's light too, with their samples.
+  CHECK(r.stats.accumulatedFrames > 2.0);
+  double history = 0.0;
+  for (std::size_t i = 1; i < r.history.pixels.size(); i += 3) history += r.history.pixels[i];
+  CHECK(history / light == doctest::Approx(1.0).epsilon(0.01));
 }
 
 TEST_CASE("temporal filter: a change of light relighting cannot undo leaves the neighbour out") {

@@ -188,18 +188,24 @@ Image trustedBoxMean(const Image& image, const Image& trust, int r) {
   return out;
 }
 
-// A neighbour's result brought to the frame's light: each pixel scaled by the
-// ratio of the frame's and the neighbour's results, averaged over the
-// (2r+1)^2 box of trusted pixels around. What the neighbour adds is then its
-// detail within the box, whose leftover error differs from the frame's.
-Image relit(const Image& moved, const Image& own, const Image& trust, int r) {
+// The factor that brings a neighbour's result to the frame's light: per pixel
+// and channel, the ratio of the frame's and the neighbour's results, each
+// averaged over the (2r+1)^2 box of trusted pixels around (1 where undefined).
+// What the neighbour adds is then its detail within the box, whose leftover
+// error differs from the frame's.
+Image relightFactor(const Image& moved, const Image& own, const Image& trust, int r) {
   const Image ownMean = trustedBoxMean(own, trust, r), movedMean = trustedBoxMean(moved, trust, r);
-  Image out = moved;
-  for (std::size_t i = 0; i < out.pixels.size(); ++i) {
+  Image factor(moved.width, moved.height, moved.channels, 1.0f);
+  for (std::size_t i = 0; i < factor.pixels.size(); ++i) {
     const float a = ownMean.pixels[i], b = movedMean.pixels[i];
-    if (a >= 0.0f && b > 1e-6f) out.pixels[i] *= std::clamp(a / b, 0.1f, 10.0f);
+    if (a >= 0.0f && b > 1e-6f) factor.pixels[i] = std::clamp(a / b, 0.1f, 10.0f);
   }
-  return out;
+  return factor;
+}
+
+Image scaled(Image image, const Image& factor) {
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] *= factor.pixels[i];
+  return image;
 }
 
 motion::FrameGeometry geometryOf(const WindowFrame& frame) {
@@ -238,6 +244,7 @@ struct Contribution {
   enum class Verdict { Used, Relit, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
   Image image;
   Image positions;  // where each pixel of the frame is in the neighbour
+  Image relight;    // relit: the factor its result was brought to the frame's light by
   std::vector<double> weight;
   double spread = 0.0;  // of its differences from the frame's result, in local noise levels
 };
@@ -274,7 +281,8 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   // frame's light first, and left out whole if that does not bring its
   // spread down. Below that, the cap keeps moving shadows rejected.
   if (fullSpread > options.changedLightSpread) {
-    out.image = relit(out.image, current.denoised, moved.trust, options.relightBox);
+    out.relight = relightFactor(out.image, current.denoised, moved.trust, options.relightBox);
+    out.image = scaled(std::move(out.image), out.relight);
     fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
     if (fullSpread > options.changedLightSpread) {
       out.verdict = Contribution::Verdict::ChangedLight;
@@ -373,8 +381,8 @@ void forEach(std::size_t count, int threads, const std::function<void(std::size_
 
 // The frame's noisy render and its neighbours', each neighbour's brought in
 // at the nearest pixel (resampling would correlate the noise, which the
-// network then leaves as blotches) with the weights its result got. A relit
-// neighbour's render is left out: its light is not the frame's. Also the
+// network then leaves as blotches) with the weights its result got, and a
+// relit one brought to the frame's light by its result's factor. Also the
 // effective number of frames per pixel, (sum w)^2 / sum w^2: the accumulated
 // render's variance is the frame's over that.
 void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowFrame*>& frames,
@@ -384,8 +392,9 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
   std::vector<double> weight(n, 1.0), squares(n, 1.0);
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     const Contribution& c = contributions[k];
-    if (c.weight.empty() || c.verdict == Contribution::Verdict::Relit) continue;
-    const Image moved = motion::reprojectNearest(frames[k]->noisy, c.positions);
+    if (c.weight.empty()) continue;
+    Image moved = motion::reprojectNearest(frames[k]->noisy, c.positions);
+    if (c.verdict == Contribution::Verdict::Relit) moved = scaled(std::move(moved), c.relight);
     for (std::size_t i = 0; i < n; ++i) {
       const double w = c.weight[i];
       if (w <= 0.0) continue;
