@@ -94,11 +94,18 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
     }
     return runOidn(net, set, frame, colourRun);
   }
-  const FrameBuffers cleaned = withCleanAux(base, frame, albedoRun, normalRun);
-  if (clean)
-    for (const char* aux : {"albedo", "normal"}) clean->buffers[aux] = cleaned.get(aux);
+  FrameBuffers cleaned = withCleanAux(base, frame, albedoRun, normalRun);
+  // Handed to `clean` once no network needs them any more.
+  auto keep = [&] {
+    if (clean)
+      for (const char* aux : {"albedo", "normal"})
+        clean->buffers[aux] = std::move(cleaned.buffers.at(aux));
+  };
   OidnRunResult whole = runOidn(net, set, cleaned, next());
-  if (!splitLightPaths) return whole;
+  if (!splitLightPaths) {
+    keep();
+    return whole;
+  }
 
   FrameBuffers part;
   part.width = frame.height;
@@ -112,6 +119,7 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
   part.buffers["albedo"] = transposed(cleaned.get("albedo"));
   part.buffers["color"] = transposed(std::exchange(split.rest, Image()));
   const torch::Tensor rest = runOidn(net, set, part, next()).image;
+  keep();
   whole.image = 0.5 * (whole.image + (diffuse + rest).transpose(2, 3));
   return whole;
 }

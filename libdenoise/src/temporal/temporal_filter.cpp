@@ -261,7 +261,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
                             const std::vector<motion::FrameGeometry>& chain, bool forward,
                             const TemporalOptions& options) {
   const WindowFrame& current = *centre.frame;
-  const Image positions = motion::chainPositions(chain, forward, options.trust);
+  Image positions = motion::chainPositions(chain, forward, options.trust);
   motion::Reprojected moved = motion::reproject(neighbour.denoised, neighbour.guides, positions,
                                                 current.guides, options.trust);
   const Image neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
@@ -273,7 +273,6 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     return out;
   }
   out.image = std::move(moved.image);
-  out.positions = positions;
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
   // Where the light changed over most of the frame (a moving lamp), the
   // differences' own spread is large too, and shading changes too faint for
@@ -295,6 +294,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   // The renders' own light test would see the change that relighting undid.
   if (out.verdict == Contribution::Verdict::Relit) {
     std::copy(moved.trust.pixels.begin(), moved.trust.pixels.end(), out.weight.begin());
+    out.positions = std::move(positions);
     return out;
   }
   const std::vector<float> changed =
@@ -304,6 +304,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     out.weight[i] = moved.trust.pixels[i] * std::clamp((options.lightHigh - changed[i]) /
                                                            (options.lightHigh - options.lightLow),
                                                        0.0, 1.0);
+  out.positions = std::move(positions);
   return out;
 }
 
