@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <random>
 
 #include "dn/io/buffer_io.h"
@@ -524,6 +525,73 @@ TEST_CASE("temporal filter: a change of light relighting cannot undo leaves the 
   CHECK(r.stats.changedLight == 2);
   CHECK(r.stats.historyShare == 0.0);
   CHECK(r.color.pixels == frames[1].denoised.pixels);
+}
+
+TEST_CASE("the environment is told by its depth (0, or beyond 1e9) and never reprojected") {
+  Guides g;
+  g.depth = Image(6, 1, 1);
+  g.depth.pixels = {0.0f, 1e10f, std::numeric_limits<float>::infinity(), 3.0f, 1e-3f, -2.0f};
+  CHECK(showsEnvironment(g, 0));
+  CHECK(showsEnvironment(g, 1));
+  CHECK(showsEnvironment(g, 2));
+  CHECK_FALSE(showsEnvironment(g, 3));
+  CHECK_FALSE(showsEnvironment(g, 4));
+  CHECK_FALSE(showsEnvironment(g, 5));         // a renderer that writes -z
+  CHECK_FALSE(showsEnvironment(Guides{}, 0));  // no depth: every pixel a surface
+
+  // A still frame whose top half is the sky, in Cycles' two ways.
+  const int w = 40, h = 24;
+  Synthetic frame = makeFrame(w, h, 0.0, 0.0);
+  for (int y = 0; y < h / 2; ++y)
+    for (int x = 0; x < w; ++x) frame.depth.at(x, y, 0) = x % 2 ? 0.0f : 1e10f;
+  const MotionField still = constantMotion(w, h, 0, 0, 0, 0);
+  const Guides gf = guides(frame);
+  const Reprojected r =
+      reproject(frame.color, gf, chainPositions({{&gf, &still}, {&gf, &still}}, false), gf);
+  for (int x = 0; x < w; ++x) {
+    CHECK(r.trust.at(x, 2, 0) == 0.0f);
+    CHECK(r.trust.at(x, h - 3, 0) == 1.0f);
+  }
+}
+
+// Cycles writes zero vectors on the environment seen directly, however the
+// camera turns: a pan's sky slides under vectors that say it stands still.
+TEST_CASE("temporal filter: a pan's sky, its vectors zero, does not cost the ground its history") {
+  // The top four fifths are the environment, sliding 3 px a frame: noiseless
+  // but for the pixel filter's jitter; the rest a surface that stands still.
+  const int w = 64, h = 48, sky = 4 * h / 5;
+  std::vector<temporal::WindowFrame> frames;
+  std::mt19937 jitter(900);
+  std::normal_distribution<float> aa(0.0f, 0.002f);
+  for (unsigned t = 0; t < 3; ++t) {
+    const Synthetic slid = makeFrame(w, h, 3.0 * t, 0.0), still = makeFrame(w, h, 0.0, 0.0);
+    temporal::WindowFrame f = stillFrame(still, 700 + t, 800 + t);
+    for (int y = 0; y < sky; ++y)
+      for (int x = 0; x < w; ++x) {
+        f.guides.depth.at(x, y, 0) = 0.0f;
+        for (int c = 0; c < 3; ++c) {
+          f.denoised.at(x, y, c) = slid.color.at(x, y, c);
+          f.noisy.at(x, y, c) = slid.color.at(x, y, c) + aa(jitter);
+        }
+      }
+    frames.push_back(std::move(f));
+  }
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
+  // The sky's mismatch is not read as a change of light over the frame.
+  CHECK(r.stats.changedLight == 0);
+  CHECK(r.stats.relit == 0);
+  // The ground averages its neighbours in; the sky is the frame's own.
+  auto rowsError = [&](const Image& image, int y0, int y1) {
+    const Synthetic sliding = makeFrame(w, h, 3.0, 0.0), ground = makeFrame(w, h, 0.0, 0.0);
+    double e = 0.0;
+    for (int y = y0; y < y1; ++y)
+      for (int x = 0; x < w; ++x)
+        for (int c = 0; c < 3; ++c)
+          e += std::pow(image.at(x, y, c) - (y < sky ? sliding : ground).color.at(x, y, c), 2);
+    return e;
+  };
+  CHECK(rowsError(r.color, sky, h) < 0.7 * rowsError(frames[1].denoised, sky, h));
+  CHECK(rowsError(r.color, 0, sky) == rowsError(frames[1].denoised, 0, sky));
 }
 
 TEST_CASE("temporal filter: the result does not depend on the number of threads") {

@@ -177,6 +177,7 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
       const int x0 = static_cast<int>(std::floor(qx)), y0 = static_cast<int>(std::floor(qy));
       const float fx = qx - x0, fy = qy - y0;
       const std::size_t here = static_cast<std::size_t>(y) * width + x;
+      if (showsEnvironment(currentGuides, here)) continue;
       double accepted = 0.0;
       std::fill(sum.begin(), sum.end(), 0.0);
       for (int t = 0; t < 4; ++t) {
@@ -201,6 +202,12 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
       out.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));
     }
   return out;
+}
+
+bool showsEnvironment(const Guides& guides, std::size_t pixel) {
+  if (guides.depth.empty()) return false;
+  const float z = guides.depth.pixels[pixel];
+  return z == 0.0f || !(std::abs(z) < 1e9f);  // also infinite or NaN
 }
 
 Image reprojectNearest(const Image& source, const Image& positions) {

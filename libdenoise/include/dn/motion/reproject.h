@@ -52,8 +52,9 @@ Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
 // A neighbour's image resampled at `positions` (bilinear over the taps whose
 // guides match the current frame's around the destination pixel; Catmull-Rom
 // where all 16 of its taps do and `cubic`), and the trust of
-// each pixel in [0, 1]: 0 off-screen, disoccluded, or another surface; else
-// the share of bilinear weight that matched (below minCoverage: 0).
+// each pixel in [0, 1]: 0 off-screen, disoccluded, another surface, or the
+// environment (showsEnvironment); else the share of bilinear weight that
+// matched (below minCoverage: 0).
 struct Reprojected {
   Image image;  // channels of `source`; zeros where trust is 0
   Image trust;  // 1 channel
@@ -64,5 +65,14 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
 // Nearest-pixel resampling (no filtering: noise stays uncorrelated), for the
 // repeated-noise test. Zeros where positions are NaN.
 Image reprojectNearest(const Image& source, const Image& positions);
+
+// Whether `pixel` shows no surface, only the environment: a depth guide of 0
+// (Cycles' Denoising Depth, Mitsuba's) or beyond 1e9 (Cycles' Z pass writes
+// 1e10). It is never reprojected: the environment seen directly has no Monte
+// Carlo noise for history to average away, and a renderer's vectors there may
+// not follow the camera (Cycles writes zero however it turns). Not a zero
+// normal: Cycles' normal guide follows glass and mirrors to the sky, and there
+// the render is noisy.
+bool showsEnvironment(const Guides& guides, std::size_t pixel);
 
 }  // namespace dn::motion
