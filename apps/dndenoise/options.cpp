@@ -88,9 +88,9 @@ output:
                       RenderMan motionBack/Fore): on (the default) averages each
                       frame's result with its neighbours' where the motion, the
                       features and the light agree, accumulates their noisy
-                      renders the same way, denoises that too and takes the mean
-                      of the two; filter: the average of results alone (one
-                      network pass a frame, not two); off: every frame alone
+                      renders the same way, denoises that too and blends the
+                      two; filter: the average of results alone (one network
+                      pass a frame, not two); off: every frame alone
   --window N          neighbours on each side for --temporal, 1-8 (default 4)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)

@@ -172,12 +172,11 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
   std::vector<double> sum(channels);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
+      const std::size_t here = static_cast<std::size_t>(y) * width + x;
       const float qx = positions.at(x, y, 0), qy = positions.at(x, y, 1);
-      if (std::isnan(qx) || std::isnan(qy)) continue;
+      if (std::isnan(qx) || std::isnan(qy) || showsEnvironment(currentGuides, here)) continue;
       const int x0 = static_cast<int>(std::floor(qx)), y0 = static_cast<int>(std::floor(qy));
       const float fx = qx - x0, fy = qy - y0;
-      const std::size_t here = static_cast<std::size_t>(y) * width + x;
-      if (showsEnvironment(currentGuides, here)) continue;
       double accepted = 0.0;
       std::fill(sum.begin(), sum.end(), 0.0);
       for (int t = 0; t < 4; ++t) {

@@ -465,9 +465,11 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
         std::count_if(k.weight.begin(), k.weight.end(), [](double w) { return w > 0.0; });
     result.stats.trusted.push_back(double(used) / mean.weight.size());
   }
-  std::vector<const WindowFrame*> frames;
-  for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
-  accumulateNoisy(current, frames, contributions, result);
+  if (options.accumulatedShare > 0.0) {
+    std::vector<const WindowFrame*> frames;
+    for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
+    accumulateNoisy(current, frames, contributions, result);
+  }
   double share = 0.0;
   for (double w : mean.weight) share += 1.0 - 1.0 / w;
   result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());

@@ -5,7 +5,7 @@
 // What every frame's network misses alike (a faint bounce of light, glossy
 // detail) no average of results brings back; the noisy renders, accumulated
 // with the same weights, hold it. Denoised once more, that estimate has errors
-// of its own, and the mean of the two beats either (blendWithHistory).
+// of its own, and a blend of the two beats either (blendWithHistory).
 #pragma once
 
 #include <string>
@@ -83,9 +83,11 @@ struct TemporalStats {
 };
 
 struct TemporalResult {
-  Image color;          // the filtered results
-  Image history;        // the noisy renders accumulated with the same weights
-  Image historyFrames;  // per pixel, the effective number of frames in `history`
+  Image color;  // the filtered results
+  // The noisy renders accumulated with the same weights, and per pixel the
+  // effective number of frames in it; empty where accumulatedShare is 0.
+  Image history;
+  Image historyFrames;
   TemporalStats stats;
 };
 
