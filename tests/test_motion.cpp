@@ -412,6 +412,61 @@ TEST_CASE("temporal filter: the two estimates blend by the accumulated share") {
   CHECK_THROWS_AS(temporal::blendWithHistory(filtered, Image(1, 1, 3), 0.5), std::invalid_argument);
 }
 
+TEST_CASE("temporal filter: the past frames' denoised histories average with the frame's own") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 700, 800);
+  // Each history: the truth plus a leftover error of its own.
+  for (unsigned t = 0; t < frames.size(); ++t)
+    frames[t].history = stillFrame(truth, 0, 900 + t).denoised;
+  const Image own = frames[2].history;
+
+  // Only the past counts: the future's histories are not there yet in a run.
+  std::vector<temporal::WindowFrame> futureOnly = frames;
+  futureOnly[0].history = futureOnly[1].history = Image();
+  const temporal::TemporalResult ahead = temporal::filterFrame(windowOf(futureOnly), 2);
+  CHECK(ahead.pastHistories.empty());
+  CHECK(temporal::historyMean(own, ahead).pixels == own.pixels);
+
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 2);
+  REQUIRE(r.pastHistories.images.size() == 2);
+  for (const std::vector<double>& weight : r.pastHistories.weights) {
+    CHECK(*std::max_element(weight.begin(), weight.end()) <= 1.0);
+    // Trusted nearly everywhere: nothing moved.
+    CHECK(std::count(weight.begin(), weight.end(), 0.0) < 0.1 * weight.size());
+  }
+  // Three independent leftovers: the error's variance falls to about a third.
+  const Image mean = temporal::historyMean(own, r);
+  CHECK(meanSquaredError(mean, truth.color) < 0.45 * meanSquaredError(own, truth.color));
+  CHECK_THROWS_AS(temporal::historyMean(Image(1, 1, 3), r), std::invalid_argument);
+
+  // A light that moved since: the past histories are brighter on the left,
+  // which their results were not. There the frame keeps its own history.
+  std::vector<temporal::WindowFrame> relit = frames;
+  for (unsigned t : {0u, 1u})
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 12; ++x)
+        for (int c = 0; c < 3; ++c) relit[t].history.at(x, y, c) += 0.6f;
+  const Image kept = temporal::historyMean(own, temporal::filterFrame(windowOf(relit), 2));
+  double brighter = 0.0;
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 12; ++x) brighter += (kept.at(x, y, 1) - own.at(x, y, 1)) / (24 * 12);
+  CHECK(std::abs(brighter) < 0.02);  // a blind average: 0.4
+}
+
+TEST_CASE("temporal filter: a past history counts only where the surface stood still") {
+  // The camera pans 1 px a frame: every history was resampled on its way in.
+  std::vector<temporal::WindowFrame> frames;
+  for (int t = 0; t < 3; ++t) {
+    const Synthetic truth = makeFrame(32, 24, t, 0);
+    frames.push_back(stillFrame(truth, 40 + t, 50 + t));
+    frames.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+    frames.back().history = frames.back().denoised;
+  }
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
+  CHECK(r.stats.historyShare > 0.3);  // the results are averaged
+  CHECK(r.pastHistories.empty());     // the histories are not
+}
+
 TEST_CASE("temporal filter: a visible sun does not hide the rest of the frame") {
   const Synthetic truth = makeFrame(128, 96, 0, 0);
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 1200, 1300);

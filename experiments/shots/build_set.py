@@ -26,7 +26,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 BPY_PYTHON = os.path.join(os.environ.get("DN_BPY_VENV") or os.path.normpath(os.path.join(HERE, "..", "..", "build-venv-bpy")),
                           "bin", "python")
 SHOTS = ["room_dolly", "room_pan", "room_still", "fox_walk", "helmet_orbit", "vase_handheld", "toycar_pass",
-         "truck_track", "lamp_swing", "sun_sweep", "glass_turntable", "texture_dolly", "fox_yard"]
+         "truck_track", "lamp_swing", "sun_sweep", "glass_turntable", "texture_dolly", "fox_yard",
+         "attic_still", "porch_still"]
 
 
 def expected(folder, moving, checks, extra):

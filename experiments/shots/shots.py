@@ -1,4 +1,4 @@
-"""The held-out evaluation shots: twelve animated Blender 5 scenes of distinct designs.
+"""The evaluation shots: fifteen Blender 5 scenes of distinct designs, animated or locked off.
 
 Run under a Python with the bpy module (PyPI bpy 5), one shot a call:
   build-venv-bpy/bin/python experiments/shots/shots.py --shot room_dolly --out /work/data/shots/room_dolly
@@ -48,6 +48,8 @@ SHOTS = {
     "glass_turntable": ("128x96", 1024, True),
     "texture_dolly":   ("128x96", 1024, True),
     "fox_yard":        ("128x96", 1024, True),
+    "attic_still":     ("128x96", 4096, False),
+    "porch_still":     ("128x96", 4096, False),
 }
 
 
@@ -489,6 +491,34 @@ def fox_yard():
     drive(fox, "location", 0, "-3.0 + 0.35 * frame")
     cam, aim = camera((0.5, -4.5, 1.2), (-2.6, 1.0, 0.4), 35)
     drive(aim, "location", 0, "-2.6 + 0.35 * frame")
+
+
+def attic_still():
+    """A locked-off attic lit mostly by bounce: the sun through a small high window
+    falls on the floor beside a sofa and a toy car on a crate. Nothing moves.
+    Added to the tuning half after the set was scored (SPLIT.md)."""
+    room(5, 6, 2.4, (2.0, 4.5, 0.9, 2.2), material("planks", (0.45, 0.35, 0.25), 0.6, "wood", 4.0),
+         material("lime", (0.85, 0.83, 0.8), 0.95))
+    sun_through_window(14.0, 40.0, 200.0)
+    model("GlamVelvetSofa", 2.0, (-1.5, 4.2, 0), math.pi / 2)
+    box("crate", (0.7, 4.4, 0.25), (0.6, 0.6, 0.5), material("crate", (0.5, 0.4, 0.3), 0.7, "wood", 6.0))
+    model("ToyCar", 0.45, (0.7, 4.4, 0.5), 0.7, drop=("Fabric",))
+    camera((0.9, 1.6, 1.3), (-0.7, 4.3, 0.5), 24)
+
+
+def porch_still():
+    """A locked-off porch outdoors (courtyard HDRI, sun): a chrome and a glass sphere
+    and a toy car on a bench before a brick wall, hard shadows. Nothing moves.
+    Added to the tuning half after the set was scored (SPLIT.md)."""
+    world_hdri("courtyard", 0.6, 1.0)
+    light("SUN", "sun", (0, 0, 10), 2.5, 1.0, (math.radians(55), 0, math.radians(-35)))
+    box("deck", (0, 1, -0.05), (8, 6, 0.1), material("deck", (0.4, 0.3, 0.22), 0.5, "wood", 10.0))
+    box("wall", (0, 2.2, 1.0), (8, 0.2, 2.0), material("bricks", (0.45, 0.22, 0.16), 0.8, "brick", 4.0))
+    box("bench", (0, 1.5, 0.22), (1.6, 0.45, 0.44), material("bench", (0.35, 0.22, 0.12), 0.5, "wood", 6.0))
+    sphere("chrome", (-0.5, 1.5, 0.56), 0.12, material("chrome", (0.9, 0.9, 0.9), 0.08, metallic=1.0))
+    sphere("glass", (-0.15, 1.45, 0.58), 0.14, material("glass", (1, 1, 1), 0.0, transmission=1.0))
+    model("ToyCar", 0.45, (0.4, 1.5, 0.44), 2.6, drop=("Fabric",))
+    camera((0.5, 0.2, 0.75), (0.0, 1.5, 0.5), 35)
 
 
 # ---------------------------------------------------------------- rendering

@@ -98,9 +98,9 @@ bool cubicSample(const Image& source, const Guides& sourceGuides, float qx, floa
                  float* out) {
   const int width = source.width, height = source.height, channels = source.channels;
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
-  if (channels > 4 || x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
+  if (channels > 8 || x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
   const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
-  std::array<double, 4> sum = {0, 0, 0, 0};
+  std::array<double, 8> sum = {};
   for (int j = 0; j < 4; ++j)
     for (int i = 0; i < 4; ++i) {
       const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;

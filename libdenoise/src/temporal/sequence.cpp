@@ -140,33 +140,65 @@ void Sequence::forget(int number) {
   keepWithin(estimates_, number - settings_.radius, number + settings_.radius);
 }
 
-DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
-                                const Read& read, const Denoise& denoise) {
-  const int n = numbers_.at(file);
+Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, const Read& read,
+                                      const Denoise& denoise) {
   const int radius = settings_.radius;
-  forget(n);
-  lastNumber_ = n;
-  // The window's frames stay held by inputs_ until the next call's forget().
-  std::shared_ptr<const DenoiseResult> centre;
+  Filtered out;
+  out.alone = estimate(number, given, read, denoise);
+  if (!out.alone) return out;
+  const Image& own = input(number, nullptr, read)->frame.denoised;
   std::vector<const WindowFrame*> window;
-  for (int m = n - radius; m <= n + radius; ++m) {
-    auto result = estimate(m, m == n ? &frame : nullptr, read, denoise);
-    if (m == n) centre = result;
-    auto source = result ? this->input(m, nullptr, read) : nullptr;
-    const bool usable = source && source->frame.denoised.sameShape(frame.get("color"));
+  for (int m = number - radius; m <= number + radius; ++m) {
+    auto source = estimate(m, nullptr, read, denoise) ? input(m, nullptr, read) : nullptr;
+    const bool usable = source && source->frame.denoised.sameShape(own);
     window.push_back(usable ? &source->frame : nullptr);
   }
   TemporalOptions options = settings_.filter;
   options.radius = radius;
-  TemporalResult filtered = filterFrame(window, radius, options);
-  lastStats_ = filtered.stats;
-  DenoiseResult result = *centre;
-  result.color = std::move(filtered.color);
-  if (options.accumulatedShare > 0.0 && filtered.stats.accumulatedFrames > 1.0) {
-    const Input& self = *inputs_.at(n);
-    const DenoiseResult history = denoise(
-        file, withHistory(frame, std::move(filtered.history), self.cleanAlbedo, self.cleanNormal));
-    result.color = blendWithHistory(result.color, history.color, options.accumulatedShare);
+  out.result = filterFrame(window, radius, options);
+  return out;
+}
+
+Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalResult& filtered,
+                                const Denoise& denoise) {
+  Input& self = *inputs_.at(number);
+  // Where no neighbour was trusted the history is the frame's own render.
+  self.frame.history =
+      filtered.stats.accumulatedFrames > 1.0
+          ? denoise(fileOf(number), withHistory(frame, std::move(filtered.history),
+                                                self.cleanAlbedo, self.cleanNormal))
+                .color
+          : self.frame.denoised;
+  return self.frame.history;
+}
+
+void Sequence::makePastHistories(int number, const Read& read, const Denoise& denoise) {
+  for (int m = number - settings_.radius; m < number; ++m) {
+    auto past = input(m, nullptr, read);
+    if (!past || !past->frame.history.empty()) continue;
+    Filtered earlier = filtered(m, nullptr, read, denoise);
+    if (!earlier.alone) continue;
+    denoisedHistory(m, read(fileOf(m)), earlier.result, denoise);
+  }
+}
+
+DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
+                                const Read& read, const Denoise& denoise) {
+  const int n = numbers_.at(file);
+  forget(n);
+  lastNumber_ = n;
+  const double share = settings_.filter.accumulatedShare;
+  // The past frames' histories: made by the calls before, or here for the
+  // first frames of a run (a shot split into runs gives the same bits).
+  if (share > 0.0) makePastHistories(n, read, denoise);
+  Filtered self = filtered(n, &frame, read, denoise);
+  lastStats_ = self.result.stats;
+  DenoiseResult result = *self.alone;
+  result.color = std::move(self.result.color);
+  if (share > 0.0) {
+    const Image own = denoisedHistory(n, frame, self.result, denoise);
+    result.color =
+        blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
   }
   return result;
 }

@@ -203,6 +203,38 @@ Image relightFactor(const Image& moved, const Image& own, const Image& trust, in
   return factor;
 }
 
+// The channels of `a`, then those of `b`, per pixel: reprojected in one call,
+// both are resampled from the same taps.
+Image stacked(const Image& a, const Image& b) {
+  Image out(a.width, a.height, a.channels + b.channels);
+  for (std::size_t i = 0; i < a.pixelCount(); ++i) {
+    std::copy_n(&a.pixels[i * a.channels], a.channels, &out.pixels[i * out.channels]);
+    std::copy_n(&b.pixels[i * b.channels], b.channels, &out.pixels[i * out.channels + a.channels]);
+  }
+  return out;
+}
+
+// Channels [first, first + count) of `image`.
+Image channelsOf(const Image& image, int first, int count) {
+  Image out(image.width, image.height, count);
+  for (std::size_t i = 0; i < image.pixelCount(); ++i)
+    std::copy_n(&image.pixels[i * image.channels + first], count, &out.pixels[i * count]);
+  return out;
+}
+
+// Per pixel, how still its surface stood on screen between the frame and the
+// neighbour at `positions`: 1 where it did not move, falling to 0 at `pixels`.
+Image stillness(const Image& positions, double pixels) {
+  Image out(positions.width, positions.height, 1);
+  for (int y = 0; y < positions.height; ++y)
+    for (int x = 0; x < positions.width; ++x) {
+      const float* p = positions.pixel(x, y);
+      const double moved = std::hypot(p[0] - x, p[1] - y);  // NaN: left the screen
+      out.at(x, y, 0) = moved < pixels ? static_cast<float>(1.0 - moved / pixels) : 0.0f;
+    }
+  return out;
+}
+
 Image scaled(Image image, const Image& factor) {
   for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] *= factor.pixels[i];
   return image;
@@ -243,8 +275,10 @@ Centre centreOf(const WindowFrame& frame) {
 struct Contribution {
   enum class Verdict { Used, Relit, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
   Image image;
-  Image positions;  // where each pixel of the frame is in the neighbour
-  Image relight;    // relit: the factor its result was brought to the frame's light by
+  Image history;        // a past neighbour's denoised history, brought in as `image`
+  Image historyWeight;  // its weight per pixel relative to `image`'s: stillness
+  Image positions;      // where each pixel of the frame is in the neighbour
+  Image relight;        // relit: the factor its result was brought to the frame's light by
   std::vector<double> weight;
   double spread = 0.0;  // of its differences from the frame's result, in local noise levels
 };
@@ -261,13 +295,22 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
                             const std::vector<motion::FrameGeometry>& chain, bool forward,
                             const TemporalOptions& options) {
   const WindowFrame& current = *centre.frame;
+  Contribution out;
   Image positions = motion::chainPositions(chain, forward, options.trust);
-  motion::Reprojected moved = motion::reproject(neighbour.denoised, neighbour.guides, positions,
-                                                current.guides, options.trust);
+  // Only the past carries a denoised history: frames are made in order, and
+  // a frame's result must not depend on how far its successors have got.
+  const bool withHistory = !forward && !neighbour.history.empty();
+  motion::Reprojected moved = motion::reproject(
+      withHistory ? stacked(neighbour.denoised, neighbour.history) : neighbour.denoised,
+      neighbour.guides, positions, current.guides, options.trust);
+  if (withHistory) {
+    out.history = channelsOf(moved.image, 3, 3);
+    out.historyWeight = stillness(positions, options.historyMotion);
+    moved.image = channelsOf(moved.image, 0, 3);
+  }
   const Image neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
   const Image residual = motion::reprojectNearest(
       difference(neighbourNoisy, tonemapped(neighbour.denoised, centre.scale)), positions);
-  Contribution out;
   if (correlation(centre.residual, residual, moved.trust) > options.repeatedNoiseCorrelation) {
     out.verdict = Contribution::Verdict::RepeatedNoise;
     return out;
@@ -282,6 +325,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   if (fullSpread > options.changedLightSpread) {
     out.relight = relightFactor(out.image, current.denoised, moved.trust, options.relightBox);
     out.image = scaled(std::move(out.image), out.relight);
+    if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
     fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
     if (fullSpread > options.changedLightSpread) {
       out.verdict = Contribution::Verdict::ChangedLight;
@@ -415,6 +459,22 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
   result.stats.accumulatedFrames = total / std::max<std::size_t>(1, n);
 }
 
+// The past neighbours' denoised histories, weighted as their results were
+// where the surface stood still.
+PastHistories pastHistoriesOf(std::vector<Contribution>& contributions, const Centre& centre) {
+  PastHistories out;
+  for (Contribution& k : contributions) {
+    if (k.history.empty() || k.weight.empty()) continue;
+    std::vector<double> weight = k.weight;
+    for (std::size_t i = 0; i < weight.size(); ++i) weight[i] *= k.historyWeight.pixels[i];
+    if (std::none_of(weight.begin(), weight.end(), [](double w) { return w > 0.0; })) continue;
+    out.images.push_back(std::move(k.history));
+    out.weights.push_back(std::move(weight));
+  }
+  if (!out.empty()) out.scale = centre.scale, out.noise = centre.noise;
+  return out;
+}
+
 }  // namespace
 
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
@@ -469,11 +529,42 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     std::vector<const WindowFrame*> frames;
     for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
     accumulateNoisy(current, frames, contributions, result);
+    result.pastHistories = pastHistoriesOf(contributions, c);
   }
   double share = 0.0;
   for (double w : mean.weight) share += 1.0 - 1.0 / w;
   result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());
   return result;
+}
+
+Image historyMean(const Image& own, const TemporalResult& result, const TemporalOptions& options) {
+  const PastHistories& past = result.pastHistories;
+  if (past.empty()) return own;
+  for (const Image& image : past.images)
+    if (!own.sameShape(image))
+      throw std::invalid_argument("historyMean: the images differ in shape");
+  // A history is far cleaner than the renders filterFrame's tests judged it
+  // by: a light that moved since shows in it where they saw only noise. It
+  // counts where it differs from the frame's own by less than the noise its
+  // accumulated render still had: fully up to lightLow such standard errors,
+  // not at all from lightHigh.
+  std::vector<Contribution> histories(past.images.size());
+  const Image ownMapped = tonemapped(own, past.scale);
+  for (std::size_t k = 0; k < histories.size(); ++k) {
+    histories[k].image = past.images[k], histories[k].weight = past.weights[k];
+    const std::vector<float> d =
+        absoluteDifference(tonemapped(histories[k].image, past.scale), ownMapped);
+    for (std::size_t i = 0; i < d.size(); ++i) {
+      const double error = past.noise[i] * std::sqrt(2.0 / result.historyFrames.pixels[i]);
+      histories[k].weight[i] *= std::clamp(
+          (options.lightHigh - d[i] / error) / (options.lightHigh - options.lightLow), 0.0, 1.0);
+    }
+  }
+  const std::vector<double> mean = weightedMean(own, histories).value;
+  Image out = own;
+  std::transform(mean.begin(), mean.end(), out.pixels.begin(),
+                 [](double v) { return static_cast<float>(v); });
+  return out;
 }
 
 Image blendWithHistory(const Image& filtered, const Image& accumulated, double share) {

@@ -67,6 +67,20 @@ class Sequence {
   // A frame's own estimate: denoised alone.
   std::shared_ptr<const DenoiseResult> estimate(int number, const FrameBuffers* given,
                                                 const Read& read, const Denoise& denoise);
+  // The frame's result alone and filtered over its window (alone: null where
+  // the frame's file is missing).
+  struct Filtered {
+    std::shared_ptr<const DenoiseResult> alone;
+    TemporalResult result;
+  };
+  Filtered filtered(int number, const FrameBuffers* given, const Read& read,
+                    const Denoise& denoise);
+  // The frame's accumulated render (of `filtered`) denoised, kept for its successors.
+  Image denoisedHistory(int number, const FrameBuffers& frame, TemporalResult& filtered,
+                        const Denoise& denoise);
+  // Makes the denoised histories of the frames within the window before `number`
+  // that lack one.
+  void makePastHistories(int number, const Read& read, const Denoise& denoise);
   std::string fileOf(int number) const;
   void forget(int number);
 
