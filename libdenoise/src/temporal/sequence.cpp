@@ -176,6 +176,7 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
   for (int m = number - settings_.radius; m < number; ++m) {
     auto past = input(m, nullptr, read);
     if (!past || !past->frame.history.empty()) continue;
+    forget(m);  // its window only, so memory stays bounded at a run's start too
     Filtered earlier = filtered(m, nullptr, read, denoise);
     if (!earlier.alone) continue;
     denoisedHistory(m, read(fileOf(m)), earlier.result, denoise);

@@ -299,13 +299,16 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   Image positions = motion::chainPositions(chain, forward, options.trust);
   // Only the past carries a denoised history: frames are made in order, and
   // a frame's result must not depend on how far its successors have got.
-  const bool withHistory = !forward && !neighbour.history.empty();
+  Image still;
+  if (!forward && !neighbour.history.empty()) still = stillness(positions, options.historyMotion);
+  const bool withHistory =
+      std::any_of(still.pixels.begin(), still.pixels.end(), [](float w) { return w > 0.0f; });
   motion::Reprojected moved = motion::reproject(
       withHistory ? stacked(neighbour.denoised, neighbour.history) : neighbour.denoised,
       neighbour.guides, positions, current.guides, options.trust);
   if (withHistory) {
     out.history = channelsOf(moved.image, 3, 3);
-    out.historyWeight = stillness(positions, options.historyMotion);
+    out.historyWeight = std::move(still);
     moved.image = channelsOf(moved.image, 0, 3);
   }
   const Image neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
