@@ -129,8 +129,9 @@ Image historyMean(const Image& own, const TemporalResult& result,
                   const TemporalOptions& options = {});
 
 // (1 - share) filtered + share accumulated, per pixel: `accumulated` is
-// TemporalResult::history denoised (and averaged by historyMean). Where no neighbour was trusted
-// the history is the frame's own render, so both are the frame denoised alone.
+// TemporalResult::history denoised (and averaged by historyMean). Where no
+// neighbour was trusted the history is the frame's own render, so both are
+// the frame denoised alone.
 Image blendWithHistory(const Image& filtered, const Image& accumulated, double share);
 
 }  // namespace dn::temporal
