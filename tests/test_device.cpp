@@ -233,6 +233,15 @@ TEST_CASE("OIDN's autoexposure made where the colour is agrees with libtonemap's
       CHECK(made == doctest::Approx(expected).epsilon(1e-5));
     }
   }
+  // Bins whose edges fall between pixels (72 / 5 = 14.4): column 14 is in the
+  // second bin, as integer division puts it. One bright column in twelve
+  // weighs on its bin's mean.
+  Image columns(72, 40, 3, 0.001f);
+  for (int y = 0; y < columns.height; ++y)
+    for (int x = 14; x < columns.width; x += 12)
+      std::fill_n(columns.pixels.begin() + (std::size_t(y) * columns.width + x) * 3, 3, 1000.0f);
+  CHECK(oidnExposureOnDevice(imageToTensor(columns)).item<float>() ==
+        doctest::Approx(tonemap::oidnExposure(columns)).epsilon(1e-5));
   const Image dark(16, 16, 3);  // every bin below the threshold: OIDN's exposure of 1
   CHECK(oidnExposureOnDevice(imageToTensor(dark)).item<float>() == 1.0f);
   CHECK(tonemap::oidnExposure(dark) == 1.0f);

@@ -233,7 +233,8 @@ torch::Tensor oidnExposureOnDevice(const torch::Tensor& color) {
   const auto longs = torch::TensorOptions().dtype(torch::kLong).device(color.device());
   auto membership = [&](int64_t size) {
     const int64_t bins = (size + kBin - 1) / kBin;
-    const torch::Tensor edges = torch::arange(bins + 1, longs) * size / bins;
+    // Integer division, as libtonemap's: a tensor's `/` would divide exactly.
+    const torch::Tensor edges = torch::div(torch::arange(bins + 1, longs) * size, bins, "floor");
     const torch::Tensor pixel = torch::arange(size, longs).unsqueeze(0);
     return ((pixel >= edges.narrow(0, 0, bins).unsqueeze(1)) &
             (pixel < edges.narrow(0, 1, bins).unsqueeze(1)))
