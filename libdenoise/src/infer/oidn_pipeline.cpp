@@ -38,10 +38,11 @@ Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& 
 // The Control Module's own convolutions in channels-last order on a GPU, as
 // the base's and their input are (no conversions inside each call); on the
 // CPU as they were trained, so that its result there stays bit for bit.
+// Called where Module::to just moved the weights, in the same inference
+// mode, so that their data is replaced as `to` replaced it.
 void useLayoutFor(torch::nn::Module& module, torch::Device device) {
   const auto format =
       device.is_cpu() ? torch::MemoryFormat::Contiguous : torch::MemoryFormat::ChannelsLast;
-  c10::InferenceMode normalTensors(false);  // weights, even when set in inference mode
   torch::NoGradGuard noGrad;
   for (auto& p : module.parameters())
     if (p.dim() == 4 && !p.is_contiguous(format)) p.set_data(p.contiguous(format));
