@@ -289,12 +289,10 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
     result.buffersUsed.insert(result.buffersUsed.end(), diffusePassBuffers().begin(),
                               diffusePassBuffers().end());
   if (controlApplies(frame.names()) && options.control == ControlUse::Auto) {
-    // Compared where the base works: exposed and PU-encoded.
-    const torch::Tensor input = imageToTensor(frame.get("color")) * out.exposure;
-    // Off the CPU from the result already copied back: the same values, one copy less.
-    const torch::Tensor output = out.image.is_cpu() ? out.image : imageToTensor(result.color);
+    // Compared where the base works: exposed and PU-encoded, on the run's device.
+    const torch::Tensor input = imageToDevice(frame.get("color"), options.device) * out.exposure;
     result.noiseLeft = measureNoiseLeft(puEncode(input.nan_to_num(0.0).clamp_min(0.0)),
-                                        puEncode(output * out.exposure), frame);
+                                        puEncode(out.image * out.exposure), frame);
   }
   return result;
 }
