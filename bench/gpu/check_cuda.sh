@@ -209,6 +209,7 @@ if [ "$device" = cuda ]; then
     fail "trace (see trace.err)"
   : >"$out/traces.txt"
   for trace in "$work"/trace/*.json; do
+    [ -f "$trace" ] || continue  # no trace written: the step above failed already
     python3 bench/gpu/trace_summary.py "$trace" >>"$out/traces.txt" 2>&1 || fail "trace summary $trace"
     echo >>"$out/traces.txt"
   done
