@@ -97,6 +97,7 @@ int run(Options o, int argc, char** argv) {
 
     DenoiseOptions options = o.denoise;
     options.device = torch::Device(o.device);
+    options.returnCleanAux = sequence != nullptr;  // its accumulated renders are denoised on them
     const auto start = Clock::now();
     if (progress)
       options.progress = [&, j](double f) {

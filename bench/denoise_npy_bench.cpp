@@ -1,14 +1,15 @@
 // The inference core on raw .npy buffers, without OpenImageIO: the OIDN base
-// in its four modes (one network; the prefilter mode; the light-path split; the
-// Control Module forced on) on each device asked for, timed as the median of
-// N runs after warm-up, the outputs written as .npy and compared with the
-// first device's (PSNR as dnmetrics computes it). Made for the GPU machine
-// (bench/gpu/check_cuda.sh), which has a CUDA LibTorch but no image I/O.
+// in its modes (one network; the prefilter mode; the light-path split; the
+// Control Module forced on; `default`: DenoiseOptions as dndenoise runs them,
+// the prefilter mode with the Control Module's gate) on each device asked for, timed as the median
+// of N runs after warm-up, the outputs written as .npy and compared with the first device's (PSNR
+// as dnmetrics computes it). Made for the GPU machine (bench/gpu/check_cuda.sh), which has a CUDA
+// LibTorch but no image I/O.
 //
 //   denoise_npy_bench --input DIR [--model models/default.dnm]
-//       [--modes base,prefilter,split,control] [--devices cpu,cuda]
+//       [--modes base,prefilter,split,control,default] [--devices cpu,cuda]
 //       [--repeats N] [--warmup N] [--threads N] [--tf32 on|off] [--output DIR]
-//       [--reference DIR] [--bfloat16 on|off] [--cudnn-benchmark on|off]
+//       [--reference DIR] [--precision float|bf16|fp16] [--cudnn-benchmark on|off]
 //       [--max-memory GB] [--trace DIR]
 //
 // DIR holds one file per buffer, named by its canonical name (color.npy,
@@ -18,7 +19,9 @@
 // of this run's first device. --trace DIR profiles one more run of each mode
 // with LibTorch's Kineto profiler (CPU operators and CUDA kernels) and writes
 // its Chrome trace as DIR/<mode>_<device>.json (bench/gpu/trace_summary.py
-// reads it). Lines "RESULT key=value ..." are for scripts.
+// reads it). --max-memory GB replaces the networks' memory budget (on CUDA
+// by default half the GPU's free memory). Lines "RESULT key=value ..." are
+// for scripts.
 #include <torch/csrc/autograd/profiler_kineto.h>
 #include <torch/torch.h>
 
@@ -49,9 +52,9 @@ struct Args {
   std::vector<std::string> devices = {"cpu"};
   int repeats = 3, warmup = 1, threads = 0;
   bool tf32 = true;  // LibTorch's default for cuDNN convolutions
-  bool bfloat16 = false;
-  bool cudnnBenchmark = false;  // LibTorch's default
-  double maxMemoryGB = 0;       // 0: DenoiseOptions' default
+  dn::Precision precision = dn::Precision::Float;
+  bool cudnnBenchmark = dn::DenoiseOptions().cudnnBenchmark;
+  double maxMemoryGB = 0;  // 0: DenoiseOptions' default
 };
 
 struct UsageError : std::runtime_error {
@@ -104,8 +107,8 @@ Args parseArgs(int argc, char** argv) {
       args.threads = positive(flag, value, 1);
     else if (flag == "--tf32" && (value == "on" || value == "off"))
       args.tf32 = value == "on";
-    else if (flag == "--bfloat16" && (value == "on" || value == "off"))
-      args.bfloat16 = value == "on";
+    else if (flag == "--precision" && dn::precisionFromName(value))
+      args.precision = *dn::precisionFromName(value);
     else if (flag == "--cudnn-benchmark" && (value == "on" || value == "off"))
       args.cudnnBenchmark = value == "on";
     else if (flag == "--max-memory")
@@ -117,44 +120,24 @@ Args parseArgs(int argc, char** argv) {
   }
   if (args.input.empty()) throw UsageError("--input DIR is required");
   for (const auto& mode : args.modes)
-    if (mode != "base" && mode != "prefilter" && mode != "split" && mode != "control")
-      throw UsageError("unknown mode '" + mode + "' (base, prefilter, split, control)");
+    if (mode != "base" && mode != "prefilter" && mode != "split" && mode != "control" &&
+        mode != "default")
+      throw UsageError("unknown mode '" + mode + "' (base, prefilter, split, control, default)");
   if (args.modes.empty() || args.devices.empty()) throw UsageError("no modes or no devices");
   return args;
-}
-
-// Every canonical buffer present in `dir` as <name>.npy; all of the colour's size.
-dn::FrameBuffers readFrame(const std::string& dir) {
-  dn::FrameBuffers frame;
-  const std::string colorPath = dir + "/color.npy";
-  if (!fs::exists(colorPath))
-    throw std::runtime_error(colorPath + ": missing (the colour is required)");
-  for (const dn::BufferSpec& spec : dn::canonicalBuffers()) {
-    const std::string path = dir + "/" + spec.name + ".npy";
-    if (!fs::exists(path)) continue;
-    dn::Image image = dn::npy::readImage(path);
-    if (image.channels != spec.channels)
-      throw std::runtime_error(path + ": " + std::to_string(image.channels) + " channels, " +
-                               spec.name + " has " + std::to_string(spec.channels));
-    if (frame.buffers.empty()) {
-      frame.width = image.width;
-      frame.height = image.height;
-    } else if (image.width != frame.width || image.height != frame.height) {
-      throw std::runtime_error(path + ": " + std::to_string(image.width) + "x" +
-                               std::to_string(image.height) + ", the colour is " +
-                               std::to_string(frame.width) + "x" + std::to_string(frame.height));
-    }
-    frame.buffers[spec.name] = std::move(image);
-  }
-  frame.dataWindow = frame.displayWindow = {0, 0, frame.width, frame.height};
-  return frame;
 }
 
 dn::DenoiseOptions optionsFor(const std::string& mode, torch::Device device, const Args& args) {
   dn::DenoiseOptions options;
   options.device = device;
-  options.bfloat16 = args.bfloat16;
-  if (args.maxMemoryGB > 0) options.maxMemoryBytes = args.maxMemoryGB * 1e9;
+  options.precision = args.precision;
+  options.cudnnBenchmark = args.cudnnBenchmark;
+  options.returnCleanAux = false;  // as dndenoise denoises single frames
+  if (args.maxMemoryGB > 0) {
+    options.maxMemoryBytes = args.maxMemoryGB * 1e9;
+    options.budgetFromFreeMemory = false;
+  }
+  if (mode == "default") return options;
   options.control = mode == "control" ? dn::ControlUse::Always : dn::ControlUse::Never;
   options.prefilter = mode != "base";
   // The module forced on over the defaults (it decides itself what it cleans).
@@ -212,11 +195,11 @@ int run(const Args& args) {
     at::globalContext().setAllowTF32CuBLAS(args.tf32);
     at::globalContext().setBenchmarkCuDNN(args.cudnnBenchmark);
   }
-  const dn::FrameBuffers frame = readFrame(args.input);
+  const dn::FrameBuffers frame = dn::npy::readFrameFolder(args.input);
   const dn::Denoiser denoiser = dn::Denoiser::fromFile(args.model);
   if (!args.output.empty()) fs::create_directories(args.output);
   const std::string size = std::to_string(frame.width) + "x" + std::to_string(frame.height);
-  const char* precision = args.bfloat16 ? "bf16" : "float";
+  const char* precision = dn::precisionName(args.precision);
   std::printf("%s, %zu buffers, %s, %d CPU thread(s), %s, TF32 %s, median of %d after %d warm-up\n",
               size.c_str(), frame.buffers.size(), args.model.c_str(), at::get_num_threads(),
               precision, tf32, args.repeats, args.warmup);
@@ -257,11 +240,11 @@ int run(const Args& args) {
       std::printf("%-10s %-8s %10.3f %10.3f %12s\n", mode.c_str(), device.c_str(), median(times),
                   best, compared ? std::to_string(psnr).c_str() : "-");
       std::printf(
-          "RESULT mode=%s device=%s size=%s precision=%s tf32=%s cudnn_benchmark=%s tiles=%zu "
-          "threads=%d repeats=%d median_s=%.4f min_s=%.4f",
+          "RESULT mode=%s device=%s size=%s precision=%s tf32=%s cudnn_benchmark=%s "
+          "memory_gb=%g tiles=%zu steered=%d threads=%d repeats=%d median_s=%.4f min_s=%.4f",
           mode.c_str(), device.c_str(), size.c_str(), precision, tf32,
-          cuda ? (args.cudnnBenchmark ? "on" : "off") : "n/a", result.tileCount,
-          at::get_num_threads(), args.repeats, median(times), best);
+          cuda ? (args.cudnnBenchmark ? "on" : "off") : "n/a", args.maxMemoryGB, result.tileCount,
+          int(result.steered), at::get_num_threads(), args.repeats, median(times), best);
       if (compared) std::printf(" psnr_vs_%s=%.2f", referenceName.c_str(), psnr);
       std::printf("\n");
       std::fflush(stdout);
@@ -280,8 +263,8 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "usage: denoise_npy_bench --input DIR [--model PATH] [--modes base,prefilter,split,"
-        "control]\n  [--devices cpu,cuda] [--repeats N] [--warmup N] [--threads N] "
-        "[--tf32 on|off] [--output DIR] [--reference DIR] [--bfloat16 on|off]\n"
+        "control,default]\n  [--devices cpu,cuda] [--repeats N] [--warmup N] [--threads N] "
+        "[--tf32 on|off] [--output DIR] [--reference DIR] [--precision float|bf16|fp16]\n"
         "  [--cudnn-benchmark on|off] [--max-memory GB] [--trace DIR]\n");
     return 2;
   } catch (const std::exception& e) {

@@ -1,12 +1,12 @@
 # Install rules: `cmake --install build --prefix /opt/dn` gives the tools, their
 # docs, the shipped models, the libraries with their headers, a CMake package
 # (find_package(DiffusionDenoise) -> dn::tonemap, dn::ocio, dn::metrics,
-# dn::buffers, dn::io, dn::data, dn::motion, dn::infer, dn::denoise,
+# dn::buffers, dn::reproject, dn::io, dn::data, dn::motion, dn::infer, dn::denoise,
 # dn::temporal) and pkg-config files (dn-tonemap, dn-metrics, dn-io,
 # dn-denoise, dn-temporal). Everything is relocatable: the
 # package files find the prefix from their own place. Built with
 # DN_WITH_OIIO=OFF: the libraries that build (dn::tonemap, dn::metrics,
-# dn::buffers, dn::infer), the CMake package and the models, no tools and no
+# dn::buffers, dn::reproject, dn::infer), the CMake package and the models, no tools and no
 # pkg-config files (theirs require OpenColorIO and OpenImageIO).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
@@ -15,7 +15,7 @@ set(DN_INSTALL_DATADIR ${CMAKE_INSTALL_DATADIR}/${PROJECT_NAME})
 set(DN_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/DiffusionDenoise)
 
 # Library target -> name after the dn:: namespace.
-set(dn_exports dn_tonemap tonemap dn_metrics metrics dn_buffers buffers)
+set(dn_exports dn_tonemap tonemap dn_metrics metrics dn_buffers buffers dn_reproject reproject)
 if(DN_WITH_OIIO)
   list(APPEND dn_exports dn_tonemap_ocio ocio dn_io io dn_data data dn_motion motion)
 endif()

@@ -1,15 +1,23 @@
 // Device placement (dn/infer/device.h and DenoiseOptions::device). Without a GPU
-// (CI, the CPU-only Debian LibTorch): CUDA is refused with a clear error before
-// any work, and the diffusion models refuse every device but the CPU. With one
-// (bench/gpu/check_cuda.sh): the OIDN base's modes on CUDA agree with the CPU.
+// (CI, the CPU-only Debian LibTorch): CUDA and half precision are refused with
+// a clear error before any work, and the diffusion models refuse every device
+// but the CPU; the pieces of the GPU path that run anywhere (images staged in
+// half, the autoexposure as tensor operations) are checked on the CPU. With
+// one (bench/gpu/check_cuda.sh): the OIDN base's modes on CUDA agree with the
+// CPU, in float and in half.
 #include "doctest_torch.h"
 #include "tiny_models.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 
+#include <tuple>
+
 #include "dn/infer/denoiser.h"
 #include "dn/infer/device.h"
+#include "dn/infer/oidn_filter.h"
 #include "dn/metrics.h"
+#include "dn/nn/model_inputs.h"
+#include "dn/tonemap.h"
 
 using namespace dn;
 
@@ -79,6 +87,7 @@ TEST_CASE("device names: cpu, cuda and cuda:N; anything else is refused in one l
   }
   CHECK_THROWS_AS(checkDeviceAvailable(torch::Device(c10::DeviceType::Meta)),
                   std::invalid_argument);
+  CHECK_THROWS_AS(freeDeviceMemory(torch::Device(torch::kCPU)), std::invalid_argument);
 }
 
 TEST_CASE("CUDA is refused where it is not available, and its index checked where it is") {
@@ -98,6 +107,10 @@ TEST_CASE("CUDA is refused where it is not available, and its index checked wher
     MESSAGE(count << " CUDA device(s)");
     CHECK(parseDevice("cuda") == torch::Device(torch::kCUDA));
     CHECK(parseDevice("cuda:0") == torch::Device(torch::kCUDA, 0));
+    // A CUDA build of the core asks the runtime (bench/gpu/check_cuda.sh builds one).
+    const std::optional<double> free = freeDeviceMemory(torch::Device(torch::kCUDA));
+    MESSAGE("free on cuda:0: " << (free ? std::to_string(*free / 1e9) + " GB" : "not asked"));
+    if (free) CHECK(*free > 0);
     const std::string past = "cuda:" + std::to_string(count);
     CHECK(messageOf([&] { parseDevice(past); }).find("CUDA device(s) present") !=
           std::string::npos);
@@ -147,4 +160,89 @@ TEST_CASE("the OIDN base's modes on the device asked for: the CPU exactly, CUDA 
     MESSAGE(std::string(mode.name) << ": CUDA against CPU " << psnr << " dB");
     CHECK(psnr >= 60.0);
   }
+}
+
+TEST_CASE("half precision runs on CUDA only: refused elsewhere in one line, before any work") {
+  const Denoiser denoiser = Denoiser::fromFile(kModel);
+  const FrameBuffers frame = syntheticFrame(72, 40);
+  DenoiseOptions options;
+  options.precision = Precision::Float16;
+  const std::string message = messageOf([&] { denoiser.denoise(frame, options); });
+  CHECK(message == "precision fp16: half runs on CUDA only (on the cpu: float or bf16)");
+  CHECK(precisionFromName("fp16") == Precision::Float16);
+  CHECK(precisionFromName("bf16") == Precision::BFloat16);
+  CHECK(precisionFromName("float") == Precision::Float);
+  CHECK_FALSE(precisionFromName("half").has_value());
+  if (!torch::cuda::is_available()) return;
+  at::globalContext().setAllowTF32CuDNN(false);
+  for (const Mode& mode : modes()) {
+    CAPTURE(mode.name);
+    const DenoiseResult reference = denoiser.denoise(frame, mode.options);
+    DenoiseOptions half = mode.options;
+    half.device = torch::Device(torch::kCUDA);
+    half.precision = Precision::Float16;
+    const DenoiseResult gpu = denoiser.denoise(frame, half);
+    const double psnr = metrics::compare(reference.color, gpu.color, {"psnr"}).values.at("psnr");
+    MESSAGE(std::string(mode.name) << ": CUDA in half against the CPU in float " << psnr << " dB");
+    CHECK(psnr >= 40.0);  // a sanity bound: check_cuda.sh reports the agreement at 1080p
+    CHECK(psnr < 200.0);  // and it did run in half
+  }
+}
+
+TEST_CASE("images cross to a device in half only where every value is a half") {
+  Image image = randomImage(37, 11, 3, 4.0, 21);
+  for (float& v : image.pixels) v = static_cast<float>(at::Half(v));  // a render saved in half
+  image.pixels[5] = NAN;
+  torch::Tensor staged = stageImage(image, false);
+  CHECK((staged.scalar_type() == torch::kHalf));
+  const bool interleaved = staged.sizes() == torch::IntArrayRef({11, 37, 3});
+  CHECK(interleaved);
+  const torch::Tensor back = staged.to(torch::kFloat).flatten();
+  const torch::Tensor original = torch::from_blob(image.pixels.data(), {int64_t(image.size())});
+  CHECK(torch::equal(back.nan_to_num(0), original.nan_to_num(0)));
+  image.pixels[image.size() - 1] = 1.0f + 1e-6f;  // one value that half would round
+  staged = stageImage(image, false);
+  CHECK((staged.scalar_type() == torch::kFloat));
+  CHECK(torch::equal(staged.flatten().nan_to_num(0), original.nan_to_num(0)));
+  // On the CPU imageToDevice is imageToTensor; on CUDA the round trip is exact.
+  CHECK(torch::equal(imageToDevice(image, torch::kCPU).nan_to_num(0),
+                     imageToTensor(image).nan_to_num(0)));
+  if (torch::cuda::is_available()) {
+    const torch::Tensor onGpu = imageToDevice(image, torch::Device(torch::kCUDA));
+    CHECK(onGpu.is_cuda());
+    Image round = tensorToImage(onGpu);
+    CHECK(torch::equal(torch::from_blob(round.pixels.data(), {int64_t(round.size())}).nan_to_num(0),
+                       original.nan_to_num(0)));
+  }
+}
+
+TEST_CASE("OIDN's autoexposure made where the colour is agrees with libtonemap's") {
+  std::vector<torch::Device> devices = {torch::kCPU};
+  if (torch::cuda::is_available()) devices.emplace_back(torch::kCUDA);
+  for (auto [width, height, channels] : {std::tuple(72, 40, 3), std::tuple(1920 / 8, 1080 / 8, 3),
+                                         std::tuple(33, 17, 1), std::tuple(5, 3, 3)}) {
+    Image color = randomImage(width, height, channels, 8.0, uint64_t(width));
+    color.pixels[0] = NAN;
+    color.pixels[7] = INFINITY;
+    color.pixels[9] = -3.0f;
+    const float expected = tonemap::oidnExposure(color);
+    for (const torch::Device& device : devices) {
+      CAPTURE(width);
+      CAPTURE(device.str());
+      const float made = oidnExposureOnDevice(imageToDevice(color, device)).item<float>();
+      CHECK(made == doctest::Approx(expected).epsilon(1e-5));
+    }
+  }
+  // Bins whose edges fall between pixels (72 / 5 = 14.4): column 14 is in the
+  // second bin, as integer division puts it. One bright column in twelve
+  // weighs on its bin's mean.
+  Image columns(72, 40, 3, 0.001f);
+  for (int y = 0; y < columns.height; ++y)
+    for (int x = 14; x < columns.width; x += 12)
+      std::fill_n(columns.pixels.begin() + (std::size_t(y) * columns.width + x) * 3, 3, 1000.0f);
+  CHECK(oidnExposureOnDevice(imageToTensor(columns)).item<float>() ==
+        doctest::Approx(tonemap::oidnExposure(columns)).epsilon(1e-5));
+  const Image dark(16, 16, 3);  // every bin below the threshold: OIDN's exposure of 1
+  CHECK(oidnExposureOnDevice(imageToTensor(dark)).item<float>() == 1.0f);
+  CHECK(tonemap::oidnExposure(dark) == 1.0f);
 }

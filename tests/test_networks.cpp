@@ -9,6 +9,7 @@
 
 #include "dn/nn/control_module.h"
 #include "dn/nn/nn_blocks.h"
+#include "dn/nn/oidn_unet.h"
 #include "dn/nn/unet.h"
 
 using namespace dn;
@@ -171,4 +172,32 @@ TEST_CASE("after a backward pass only control parameters have gradients") {
   }
   CHECK(control_grad > 0.0);
   CHECK(parameterCount(controlled, true) == parameterCount(*controlled.control()));
+}
+
+TEST_CASE("OIDN network: weights changed in place are seen by the next call (no stale copies)") {
+  torch::manual_seed(11);
+  OidnUNet net(OidnUNetConfig{OidnArch::Small, 9, 3});
+  OidnUNet twin(OidnUNetConfig{OidnArch::Small, 9, 3});
+  const torch::Tensor x = torch::rand({1, 9, 32, 48});
+  torch::NoGradGuard noGrad;
+  auto copyWeights = [&] {
+    const auto from = net->named_parameters();
+    for (auto& p : twin->named_parameters()) p.value().copy_(from[p.key()]);
+  };
+  copyWeights();
+  const torch::Tensor before = net->forward(x);
+  CHECK(torch::equal(before, twin->forward(x)));
+  // The folded upsampling weights of a decoder level are kept between calls.
+  for (auto& p : net->named_parameters())
+    if (p.key().rfind("dec_conv", 0) == 0) p.value().mul_(0.5);
+  const torch::Tensor after = net->forward(x);
+  CHECK_FALSE(torch::equal(before, after));
+  copyWeights();
+  CHECK(torch::equal(after, twin->forward(x)));  // as if made anew from the halved weights
+  // A reduced precision and back: float is the float result bit for bit.
+  net->useInnerPrecision(torch::kBFloat16);
+  CHECK_FALSE(torch::equal(net->forward(x), after));
+  net->useInnerPrecision(torch::kFloat);
+  CHECK(torch::equal(net->forward(x), after));
+  CHECK_THROWS_AS(net->useInnerPrecision(torch::kDouble), std::invalid_argument);
 }

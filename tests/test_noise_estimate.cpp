@@ -122,3 +122,26 @@ TEST_CASE("the noise left is measured where the features are flat, as a convolut
         doctest::Approx(std::sqrt(energy(output) / energy(input))).epsilon(1e-5));
   CHECK(measured.fraction() == doctest::Approx(0.2).epsilon(0.05));
 }
+
+TEST_CASE("the noise left measured by tensor operations (a GPU's way) agrees with the loops") {
+  const int64_t h = 70, w = 90;
+  auto albedo = torch::full({1, 3, h, w}, 0.5);
+  albedo.narrow(3, 45, 45).add_(gaussian(h, 45, 0.2, 9));
+  const FrameBuffers textured = frameWith(albedo);
+  const auto clean = ramp(h, w), noise = gaussian(h, w, 0.1, 10);
+  auto left = torch::full({1, 1, 1, w}, 1.0);
+  left.narrow(3, 45, 45).fill_(0.2);
+  const auto input = clean + noise, output = clean + noise * (1.2 - left);
+  for (const FrameBuffers& frame : {textured, FrameBuffers()}) {
+    const NoiseLeft loops = measureNoiseLeft(input, output, frame);
+    const NoiseLeft tensors = measureNoiseLeftByTensors(input, output, frame);
+    CHECK(tensors.input == doctest::Approx(loops.input).epsilon(1e-5));
+    CHECK(tensors.output == doctest::Approx(loops.output).epsilon(1e-5));
+  }
+  // Only the flat left half counts, where the output keeps a fifth of the noise.
+  const NoiseLeft flatOnly = measureNoiseLeftByTensors(input, output, textured);
+  CHECK(flatOnly.fraction() == doctest::Approx(0.2).epsilon(0.05));
+  CHECK(measureNoiseLeftByTensors(torch::rand({1, 3, 2, 2}), torch::rand({1, 3, 2, 2}),
+                                  FrameBuffers())
+            .fraction() == 0.0);
+}

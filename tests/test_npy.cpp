@@ -143,3 +143,31 @@ TEST_CASE("what is not float32/float16, little-endian, C order is refused in one
   checkRefused("bad_magic.npy", "not a .npy file");
   checkRefused("no_such_file.npy", "cannot open");
 }
+
+TEST_CASE("a frame as a folder of .npy buffers: the colour required, shapes checked") {
+  const fs::path dir = fs::temp_directory_path() / ("dn_npy_frame_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  auto message = [&] {
+    try {
+      npy::readFrameFolder(dir.string());
+    } catch (const npy::NpyError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  CHECK(message() == (dir / "color.npy").string() + ": missing (the colour is required)");
+  npy::writeImage((dir / "color.npy").string(), Image(6, 4, 3, 0.5f));
+  npy::writeImage((dir / "albedo.npy").string(), Image(6, 4, 3, 0.25f), npy::DType::Float16);
+  npy::writeImage((dir / "notes.npy").string(), Image(2, 2, 1));  // not a buffer: ignored
+  const FrameBuffers frame = npy::readFrameFolder(dir.string());
+  CHECK(frame.width == 6);
+  CHECK(frame.height == 4);
+  CHECK(frame.buffers.size() == 2);
+  CHECK(frame.get("albedo").pixels.front() == 0.25f);
+  npy::writeImage((dir / "normal.npy").string(), Image(5, 4, 3));
+  CHECK(message() == (dir / "normal.npy").string() + ": 5x4, the colour is 6x4");
+  npy::writeImage((dir / "normal.npy").string(), Image(6, 4, 1));
+  CHECK(message() == (dir / "normal.npy").string() + ": 1 channels, normal has 3");
+  fs::remove_all(dir);
+}

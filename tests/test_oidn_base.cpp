@@ -375,7 +375,7 @@ TEST_CASE("bfloat16 convolutions stay near OIDN's result, and float is restored 
   const Image expected =
       readImage(kOidnOut, 3, {"prefiltered.R", "prefiltered.G", "prefiltered.B"});
   DenoiseOptions half;
-  half.bfloat16 = true;
+  half.precision = Precision::BFloat16;
   const DenoiseResult rounded = denoiser.denoise(frame, half);
   const double psnr = reinhardPsnr(rounded.color, expected);
   MESSAGE("bfloat16 against OIDN: " << psnr << " dB");

@@ -84,7 +84,7 @@ TEST_CASE("at initialisation the controlled model returns exactly the base's out
     torch::NoGradGuard noGrad;
     const TrainBatch batch = randomBatch(2, 32);
     const torch::Tensor exposure = batchExposure(batch.noisy);
-    const OidnInputSet& set = oidnInputSet("hdr_alb_nrm");
+    const OidnInputSet set = oidnInputSet("hdr_alb_nrm");  // by value: the name is a temporary
     const torch::Tensor x =
         oidnBaseInput(torch::cat({batch.noisy, batch.aux.narrow(1, 0, 6)}, 1), set, exposure);
     const torch::Tensor base = model->steered()->forward(x);
@@ -158,7 +158,7 @@ TEST_CASE("a controlled model file round-trips and refuses a mismatch") {
 
 TEST_CASE("inputs built from tensors equal OIDN's own") {
   const FrameBuffers frame = readFrame(kCrop);
-  const OidnInputSet& set = oidnInputSet("hdr_alb_nrm");
+  const OidnInputSet set = oidnInputSet("hdr_alb_nrm");  // by value: the name is a temporary
   const TileRect all{0, 0, frame.height, frame.width};
   const float exposure = tonemap::oidnExposure(frame.get("color"));
   std::vector<torch::Tensor> parts;
@@ -169,7 +169,7 @@ TEST_CASE("inputs built from tensors equal OIDN's own") {
   CHECK(batchExposure(parts[0]).item<float>() == exposure);
   for (const char* name : {"alb", "nrm"}) {  // the prefilter's networks, unexposed
     CAPTURE(name);
-    const OidnInputSet& auxSet = oidnInputSet(name);
+    const OidnInputSet auxSet = oidnInputSet(name);  // by value: the name is a temporary
     CHECK(torch::equal(
         oidnBaseInput(imageToTensor(frame.get(auxSet.denoised())), auxSet, torch::ones({1})),
         oidnInput(frame, auxSet, 1.0f, all)));

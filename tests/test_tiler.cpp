@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "dn/infer/oidn_filter.h"
 #include "dn/infer/tiler.h"
 #include "dn/nn/model_inputs.h"
 
@@ -170,4 +171,38 @@ TEST_CASE("tiles built from their rectangles equal the untiled output") {
     REQUIRE(tiled.sizes() == full.sizes());
     CHECK((tiled - full).abs().max().item<float>() < 1e-5);
   }
+}
+
+TEST_CASE("OIDN's tiles: the CPU's budget and cap, or a GPU's share of its free memory") {
+  // The large network of the prefilter mode, the one that decides the tiles at 4K.
+  const double bytesPerPixel =
+      oidnBytesPerPixel(OidnUNetConfig{OidnArch::Large, 9, 3, false, false});
+  const int64_t blend = 4 * kOidnOverlapLarge;
+  OidnRunOptions cpu;  // 3 GB and OIDN's 2160x2160 cap
+  const Tiler cpuTiles = planOidnTiles(2160, 3840, bytesPerPixel, blend, cpu);
+  CHECK(cpuTiles.tiles().size() == 5);  // full-height columns, as docs/dndenoise.md says
+  CHECK(cpuTiles.tiles().front().height == 2160);
+  CHECK(planOidnTiles(1080, 1920, bytesPerPixel, blend, cpu).tiles().size() == 1);
+
+  OidnRunOptions gpu;
+  gpu.maxTilePixels = 0;
+  gpu.maxMemoryBytes = deviceMemoryBudget(100e9);  // a large GPU, mostly free
+  CHECK(gpu.maxMemoryBytes == doctest::Approx(kDeviceBudgetShare * 100e9));
+  CHECK(planOidnTiles(2160, 3840, bytesPerPixel, blend, gpu).tiles().size() == 1);
+  // The same budget with OIDN's CPU cap: tiled, as before.
+  OidnRunOptions capped = gpu;
+  capped.maxTilePixels = kOidnMaxTilePixels;
+  CHECK(planOidnTiles(2160, 3840, bytesPerPixel, blend, capped).tiles().size() > 1);
+  // A small GPU's budget tiles 4K; nothing free, the smallest tiles, never none.
+  gpu.maxMemoryBytes = deviceMemoryBudget(8e9);
+  const Tiler small = planOidnTiles(2160, 3840, bytesPerPixel, blend, gpu);
+  CHECK(small.tiles().size() > 1);
+  for (const TileRect& r : small.tiles())
+    CHECK(double(r.height) * r.width * bytesPerPixel <= gpu.maxMemoryBytes);
+  CHECK(deviceMemoryBudget(-1.0) == 0.0);
+  gpu.maxMemoryBytes = deviceMemoryBudget(0.0);
+  CHECK(planOidnTiles(2160, 3840, bytesPerPixel, blend, gpu).tiles().size() > 100);
+  // An explicit tile size wins over every budget.
+  gpu.tile = 1024;
+  CHECK(planOidnTiles(2160, 3840, bytesPerPixel, blend, gpu).tiles().front().width == 1024);
 }

@@ -48,9 +48,10 @@ quality (the default model, models/default.dnm, and others over OIDN's networks)
   --prefilter on|off  albedo and normal denoised first (on, default: fast turns it off)
   --light-paths on|off  the light-path split where the passes exist (off, default;
                       -q high turns it on)
-  --precision float|bf16  the convolutions inside the networks in float (default:
-                      OIDN's result) or bfloat16: faster on CPUs with AMX, 0.03 dB
-                      lower on average (docs/dndenoise.md, Speed and memory)
+  --precision float|bf16|fp16  the convolutions inside the networks in float
+                      (default: OIDN's result), bfloat16 (faster on CPUs with AMX,
+                      0.03 dB lower on average; docs/dndenoise.md, Speed and memory)
+                      or half (fp16, as OIDN's CUDA device: with --device cuda only)
   --control auto|on|off  models with a Control Module (the default): steer the base
                       when it leaves correlated noise (auto, default), always, or never
   --sigmas LIST|none  models with a diffusion Control Module (the default): the
@@ -115,7 +116,8 @@ display (PNG/JPEG/TIFF outputs and --preview):
 resources:
   --tile N            network tile size in pixels, 16-8192 (default: the whole
                       frame, or the largest tile under --maxmem)
-  --maxmem MB         memory budget for network activations, >= 100 (default 3000)
+  --maxmem MB         memory budget for network activations, >= 100 (default 3000;
+                      with --device cuda: half the GPU's free memory)
   --threads N         CPU threads, 1-1024 (default: all cores)
   --device cpu|cuda   (default cpu; cuda needs a CUDA build of LibTorch and a GPU)
 checks and timing:
@@ -196,9 +198,9 @@ Options parseArgs(int argc, char** argv) {
       o.given.push_back({"--quality", OptionScope::OidnBase});
     } else if (args.flag("--precision")) {
       const std::string v = args.value("--precision");
-      if (v != "float" && v != "bf16")
-        throw cli::UsageError("--precision must be float or bf16, got " + v);
-      o.denoise.bfloat16 = v == "bf16";
+      const auto precision = precisionFromName(v);
+      if (!precision) throw cli::UsageError("--precision must be float, bf16 or fp16, got " + v);
+      o.denoise.precision = *precision;
       o.given.push_back({"--precision", OptionScope::OidnBase});
     } else if (args.flag("--steps")) {
       o.denoise.scratch.respacing = std::to_string(args.intValue("--steps", 1, 1000));
@@ -321,6 +323,7 @@ Options parseArgs(int argc, char** argv) {
       o.given.push_back({"--overlap", OptionScope::Scratch});
     } else if (args.flag("--maxmem")) {
       o.denoise.maxMemoryBytes = args.doubleValue("--maxmem", 100.0, 1e7) * 1e6;
+      o.denoise.budgetFromFreeMemory = false;  // on a GPU too
     } else if (args.flag("--threads")) {
       int n = args.intValue("--threads", 1, 1024);
       torch::set_num_threads(n);
@@ -377,6 +380,10 @@ Options parseArgs(int argc, char** argv) {
     throw cli::UsageError("--device must be cpu or cuda");
   if (o.device == "cuda" && !torch::cuda::is_available())
     throw cli::UsageError("--device cuda: no CUDA device is available to this LibTorch build");
+  if (o.denoise.precision == Precision::Float16 && o.device != "cuda")
+    throw cli::UsageError(
+        "--precision fp16 runs on CUDA only (--device cuda); on the CPU: "
+        "float or bf16");
   if (o.model.empty()) o.model = cli::defaultModelPath();
   return o;
 }

@@ -26,6 +26,13 @@ void reportBuffers(const std::string& name, const std::vector<std::string>& used
              ignored.empty() ? "none" : ignored);
 }
 
+// The precision of the networks' inner convolutions, where not float.
+const char* precisionNote(Precision precision) {
+  return precision == Precision::BFloat16  ? ", bfloat16"
+         : precision == Precision::Float16 ? ", half"
+                                           : "";
+}
+
 }  // namespace
 
 void reportInputStatistics(const std::string& name, const Image& color) {
@@ -61,8 +68,8 @@ void reportResult(const Options& o, const Denoiser& denoiser, const std::string&
                    ? "pretrained base, albedo and normal prefiltered, diffuse part apart"
                : result.prefiltered ? "pretrained base, albedo and normal prefiltered"
                                     : "pretrained base",
-               o.denoise.bfloat16 ? ", bfloat16" : "", result.exposure, result.steps,
-               result.tileCount, result.tileSize, times[times.size() / 2], times.size(),
+               precisionNote(o.denoise.precision), result.exposure, result.steps, result.tileCount,
+               result.tileSize, times[times.size() / 2], times.size(),
                times[times.size() / 2] / (frame.width * double(frame.height) / 1e6));
   } else if (o.verbose || o.repeats > 1) {
     std::sort(times.begin(), times.end());

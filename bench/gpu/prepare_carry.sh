@@ -7,10 +7,10 @@
 #   doctest/     doctest's header and CMake package (for the core's tests)
 #   oidn/        with --with-oidn: OIDN 2.5.1's core and CUDA device from the
 #                pyoidn wheel, for OIDN's own CUDA timings (about 54 MB)
-#   build/       with --cuda-build DIR: denoise_npy_bench, test_device and
-#                test_npy from a core build against the GPU machine's PyTorch
-#                wheel (docs/dndenoise.md#gpu), stripped, so that the GPU run
-#                skips its build
+#   build/       with --cuda-build DIR: denoise_npy_bench, temporal_npy_bench,
+#                test_device, test_npy and test_tiler from a core build against
+#                the GPU machine's PyTorch wheel (docs/dndenoise.md#gpu),
+#                stripped, so that the GPU run skips its build
 #
 #   bash bench/gpu/prepare_carry.sh [--with-oidn] [--cuda-build DIR] [BUILD_DIR]
 set -euo pipefail
@@ -66,7 +66,7 @@ fi
 
 if [ -n "$cuda_build" ]; then
   mkdir -p "$carry/build/bin"
-  for program in denoise_npy_bench test_device test_npy; do
+  for program in denoise_npy_bench temporal_npy_bench test_device test_npy test_tiler; do
     strip -o "$carry/build/bin/$program" "$cuda_build/bin/$program"
   done
   sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$cuda_build/CMakeCache.txt" >"$carry/build/source_dir"

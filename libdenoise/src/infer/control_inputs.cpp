@@ -53,6 +53,10 @@ torch::Tensor cleanAux(const OidnBase& base, const torch::Tensor& albedo,
 }
 
 torch::Tensor puEncode(const torch::Tensor& radiance) {
+  if (!radiance.is_cpu())  // the same curve in tensor operations where the tensor is
+    return puEncodeTensor(
+        torch::nan_to_num(radiance.to(torch::kFloat32), 0.0, std::numeric_limits<float>::max(), 0.0)
+            .clamp(0.0f, std::numeric_limits<float>::max()));
   return elementwise(radiance, [](float v) {
     return tonemap::pu(std::clamp(finiteOrZero(v), 0.0f, std::numeric_limits<float>::max()));
   });
@@ -83,9 +87,8 @@ torch::Tensor oidnBaseInput(const torch::Tensor& buffers, const OidnInputSet& se
   return torch::cat(parts, 1);
 }
 
-torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& extras,
-                          const torch::Tensor& present, const torch::Tensor& exposure,
-                          const torch::Tensor& state, const torch::Tensor& sigma) {
+torch::Tensor controlHintExtras(const OidnControlConfig& config, const torch::Tensor& extras,
+                                const torch::Tensor& present, const torch::Tensor& exposure) {
   std::vector<torch::Tensor> parts;
   int64_t offset = 0;
   for (const auto& name : config.extra_buffers) {
@@ -113,11 +116,21 @@ torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& 
   const int64_t b = extras.size(0), h = extras.size(2), w = extras.size(3);
   if (!config.extra_buffers.empty())
     parts.push_back(present.to(torch::kFloat32).view({b, -1, 1, 1}).expand({b, -1, h, w}));
-  if (config.diffusion) {
-    parts.push_back(state);
-    parts.push_back((perSample(sigma, state) * kSigmaInputScale).expand({b, 1, h, w}));
-  }
-  return torch::cat(parts, 1);
+  return parts.empty() ? extras.new_zeros({b, 0, h, w}) : torch::cat(parts, 1);
+}
+
+torch::Tensor withDiffusionState(const torch::Tensor& hintExtras, const torch::Tensor& state,
+                                 const torch::Tensor& sigma) {
+  const int64_t b = state.size(0), h = state.size(2), w = state.size(3);
+  return torch::cat(
+      {hintExtras, state, (perSample(sigma, state) * kSigmaInputScale).expand({b, 1, h, w})}, 1);
+}
+
+torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& extras,
+                          const torch::Tensor& present, const torch::Tensor& exposure,
+                          const torch::Tensor& state, const torch::Tensor& sigma) {
+  const torch::Tensor hint = controlHintExtras(config, extras, present, exposure);
+  return config.diffusion ? withDiffusionState(hint, state, sigma) : hint;
 }
 
 std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
@@ -135,6 +148,24 @@ std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
   torch::Tensor extras =
       parts.empty() ? torch::zeros({1, 0, r.height, r.width}) : torch::cat(parts, 1);
   return {extras, torch::tensor(flags).view({1, -1})};
+}
+
+std::pair<torch::Tensor, torch::Tensor> frameExtrasOnDevice(const FrameBuffers& frame,
+                                                            const OidnControlConfig& config,
+                                                            torch::Device device) {
+  const auto floats = torch::TensorOptions().dtype(torch::kFloat).device(device);
+  std::vector<torch::Tensor> parts;
+  std::vector<float> flags;
+  for (const auto& name : config.extra_buffers) {
+    const int64_t channels = findBufferSpec(name)->channels;
+    const bool has = frame.has(name);
+    flags.push_back(has ? 1.0f : 0.0f);
+    parts.push_back(has ? imageToDevice(frame.get(name), device)
+                        : torch::zeros({1, channels, frame.height, frame.width}, floats));
+  }
+  torch::Tensor extras = parts.empty() ? torch::zeros({1, 0, frame.height, frame.width}, floats)
+                                       : torch::cat(parts, 1);
+  return {extras, torch::tensor(flags).view({1, -1}).to(device)};
 }
 
 }  // namespace dn

@@ -26,6 +26,23 @@ std::optional<Quality> qualityFromName(const std::string& name) {
   return std::nullopt;
 }
 
+std::optional<Precision> precisionFromName(const std::string& name) {
+  for (Precision p : {Precision::Float, Precision::BFloat16, Precision::Float16})
+    if (name == precisionName(p)) return p;
+  return std::nullopt;
+}
+
+const char* precisionName(Precision precision) {
+  switch (precision) {
+    case Precision::BFloat16:
+      return "bf16";
+    case Precision::Float16:
+      return "fp16";
+    default:
+      return "float";
+  }
+}
+
 void setQuality(DenoiseOptions& options, Quality quality) {
   options.prefilter = quality != Quality::Fast;
   options.lightPaths = quality == Quality::High;

@@ -1,6 +1,13 @@
 #include "dn/infer/device.h"
 
+#include <algorithm>
 #include <stdexcept>
+
+#if DN_WITH_CUDA
+#include <c10/cuda/CUDACachingAllocator.h>
+#include <c10/cuda/CUDAGuard.h>
+#include <cuda_runtime_api.h>
+#endif
 
 namespace dn {
 
@@ -29,6 +36,26 @@ void checkDeviceAvailable(const torch::Device& device) {
   if (device.has_index() && device.index() >= count)
     throw std::invalid_argument("device '" + device.str() + "': only " + std::to_string(count) +
                                 " CUDA device(s) present");
+}
+
+std::optional<double> freeDeviceMemory(const torch::Device& device) {
+  checkDeviceAvailable(device);
+  if (!device.is_cuda())
+    throw std::invalid_argument("device '" + device.str() + "': free memory is asked of CUDA only");
+#if DN_WITH_CUDA
+  const c10::cuda::CUDAGuard guard(device);
+  std::size_t free = 0, total = 0;
+  if (cudaMemGetInfo(&free, &total) != cudaSuccess)
+    throw std::runtime_error("device '" + device.str() + "': cudaMemGetInfo failed");
+  const auto stats =
+      c10::cuda::CUDACachingAllocator::getDeviceStats(guard.current_device().index());
+  constexpr std::size_t kAggregate = 0;  // StatType::AGGREGATE: all pools together
+  const int64_t cachedUnused =
+      stats.reserved_bytes[kAggregate].current - stats.allocated_bytes[kAggregate].current;
+  return double(free) + double(std::max<int64_t>(0, cachedUnused));
+#else
+  return std::nullopt;
+#endif
 }
 
 }  // namespace dn

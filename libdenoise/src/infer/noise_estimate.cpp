@@ -97,8 +97,35 @@ NoiseSums noiseSums(const float* input, const float* output, int64_t channels, c
 
 }  // namespace
 
+NoiseLeft measureNoiseLeftByTensors(const torch::Tensor& input, const torch::Tensor& output,
+                                    const FrameBuffers& frame) {
+  if (input.size(2) < 3 || input.size(3) < 3) return {};
+  const std::vector<std::string> features = featureBuffers(frame);
+  const torch::Tensor in = highPass(input.to(torch::kFloat32)).square().sum(1).to(torch::kDouble);
+  const torch::Tensor out = highPass(output.to(torch::kFloat32)).square().sum(1).to(torch::kDouble);
+  torch::Tensor flat = torch::zeros_like(in);
+  if (!features.empty()) {
+    std::vector<torch::Tensor> parts;
+    for (const auto& name : features)
+      parts.push_back(imageToDevice(frame.get(name), input.device()));
+    const torch::Tensor guide = normalizeAux(torch::cat(parts, 1), features, tonemap::Curve::Log);
+    const torch::Tensor edge = std::get<0>(highPass(guide).abs().max(1));
+    flat = (edge < kFeatureEdge).to(torch::kDouble);
+  }
+  const torch::Tensor sums =
+      torch::stack({in.sum(), out.sum(), (in * flat).sum(), (out * flat).sum(), flat.sum()}).cpu();
+  const double* v = sums.data_ptr<double>();
+  const double pixels = double(in.size(1)) * double(in.size(2));
+  const bool useFlat = v[4] >= kMinMaskedFraction * pixels;
+  NoiseLeft left;
+  left.input = std::sqrt(useFlat ? v[2] : v[0]);
+  left.output = std::sqrt(useFlat ? v[3] : v[1]);
+  return left;
+}
+
 NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
                            const FrameBuffers& frame) {
+  if (!input.is_cpu()) return measureNoiseLeftByTensors(input, output, frame);
   const std::vector<std::string> features = featureBuffers(frame);
   const torch::Tensor in = input.to(torch::kFloat32).contiguous();
   const torch::Tensor out = output.to(torch::kFloat32).contiguous();

@@ -7,6 +7,7 @@
 #include <ATen/Parallel.h>
 #include <ATen/record_function.h>
 
+#include "dn/nn/model_inputs.h"
 #include "dn/pu_curve.h"
 #include "dn/tonemap.h"
 
@@ -22,12 +23,6 @@ float encodeNormal(float v) { return std::clamp(v, -1.0f, 1.0f) * 0.5f + 0.5f; }
 float puNorm() {  // the unscaled curve at 65504, as libtonemap computes it
   using namespace tonemap::pu_curve;
   return kE * std::log(kHalfMax + kF) + kG;
-}
-torch::Tensor puEncodeOnDevice(const torch::Tensor& y) {
-  using namespace tonemap::pu_curve;
-  return torch::where(y <= kY0, y * kA,
-                      torch::where(y <= kY1, y.pow(kC) * kB + kD, (y + kF).log() * kE + kG)) /
-         puNorm();
 }
 torch::Tensor puDecodeOnDevice(const torch::Tensor& t) {
   using namespace tonemap::pu_curve;
@@ -65,6 +60,15 @@ void fillPlanes(const Image& image, const TileRect& r, float* out, Transform tra
   });
 }
 
+}  // namespace
+
+torch::Tensor puEncodeTensor(const torch::Tensor& y) {
+  using namespace tonemap::pu_curve;
+  return torch::where(y <= kY0, y * kA,
+                      torch::where(y <= kY1, y.pow(kC) * kB + kD, (y + kF).log() * kE + kG)) /
+         puNorm();
+}
+
 // The tiles a frame is run in. The whole frame when its pixels fit the budget
 // (a square tile from the budget alone would split a 1920x1080 frame, 2.1
 // MPix, into two 1840-pixel-wide tiles that overlap almost entirely). Else
@@ -72,15 +76,14 @@ void fillPlanes(const Image& image, const TileRect& r, float* out, Transform tra
 // where the frame is at most 2160 tall, whichever runs the networks over fewer
 // pixels: at 3840x2160 and a 1584-px side, 5 columns of 1152 x 2160 (12.4
 // MPix) against 6 squares (15.1 MPix).
-Tiler tilerFor(const FrameBuffers& frame, double bytesPerPixel, int64_t blend,
-               const OidnRunOptions& options) {
-  const int64_t height = frame.height, width = frame.width;
+Tiler planOidnTiles(int64_t height, int64_t width, double bytesPerPixel, int64_t blend,
+                    const OidnRunOptions& options) {
   if (options.tile > 0) return Tiler(height, width, options.tile, blend);
-  if (height * width <= kOidnMaxTilePixels &&
-      height * width * bytesPerPixel <= options.maxMemoryBytes)
+  const bool underCap = options.maxTilePixels <= 0 || height * width <= options.maxTilePixels;
+  if (underCap && height * width * bytesPerPixel <= options.maxMemoryBytes)
     return Tiler(height, width, 0, blend);
-  const int64_t side = std::min<int64_t>(
-      2160, tileSizeForMemory(options.maxMemoryBytes, bytesPerPixel, kOidnAlignment));
+  int64_t side = tileSizeForMemory(options.maxMemoryBytes, bytesPerPixel, kOidnAlignment);
+  if (options.maxTilePixels > 0) side = std::min<int64_t>(2160, side);
   Tiler squares(height, width, side, blend);
   const int64_t columnWidth = side * side / height / kOidnAlignment * kOidnAlignment;
   if (height > 2160 || columnWidth < 2 * blend) return squares;
@@ -88,7 +91,9 @@ Tiler tilerFor(const FrameBuffers& frame, double bytesPerPixel, int64_t blend,
   return tiledPixels(columns) < tiledPixels(squares) ? columns : squares;
 }
 
-}  // namespace
+double deviceMemoryBudget(double freeBytes) {
+  return kDeviceBudgetShare * std::max(0.0, freeBytes);
+}
 
 torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
                         const TileRect& r) {
@@ -133,17 +138,34 @@ torch::Tensor regionOnDevice(const FrameBuffers& frame, const std::string& name,
       .expand({3, r.height, r.width});
 }
 
+torch::Tensor scalarOn(float value, torch::Device device) {
+  return torch::full({}, value, torch::TensorOptions().dtype(torch::kFloat).device(device));
+}
+
 }  // namespace
+
+torch::Tensor bufferOnDevice(const Image& image, torch::Device device) {
+  // The stored channels cross (half where the values are halves), one is broadcast there.
+  const torch::Tensor stored = imageToDevice(image, device).squeeze(0);
+  const torch::Tensor three = stored.narrow(0, 0, image.channels >= 3 ? 3 : 1);
+  return three.expand({3, image.height, image.width});
+}
 
 torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
                                 const TileRect& r, torch::Device device,
                                 const DeviceBuffers& onDevice) {
+  return oidnInputOnDevice(frame, set, scalarOn(exposure, device), r, device, onDevice);
+}
+
+torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set,
+                                const torch::Tensor& exposure, const TileRect& r,
+                                torch::Device device, const DeviceBuffers& onDevice) {
   std::vector<torch::Tensor> planes;
   for (size_t b = 0; b < set.buffers.size(); ++b) {
     const std::string& name = set.buffers[b];
     torch::Tensor v = nanToZero(regionOnDevice(frame, name, r, device, onDevice));
     if (name == "color")
-      v = puEncodeOnDevice((v * exposure).clamp(0.0f, std::numeric_limits<float>::max()));
+      v = puEncodeTensor((v * exposure).clamp(0.0f, std::numeric_limits<float>::max()));
     else if (name == "albedo" && b == 0)
       v = srgbEncodeOnDevice(v.clamp(0.0f, 1.0f));
     else if (name == "albedo")
@@ -179,13 +201,55 @@ torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& 
 
 torch::Tensor oidnOutputDecodeOnDevice(const torch::Tensor& output, const OidnInputSet& set,
                                        float exposure) {
+  return oidnOutputDecodeOnDevice(output, set, scalarOn(exposure, output.device()));
+}
+
+torch::Tensor oidnOutputDecodeOnDevice(const torch::Tensor& output, const OidnInputSet& set,
+                                       const torch::Tensor& exposure) {
   const torch::Tensor v = nanToZero(output.to(torch::kFloat32)).clamp_min(0.0f);
   if (set.denoised() == "color") {
-    const float scale = exposure != 0.0f ? 1.0f / exposure : 0.0f;
+    const torch::Tensor scale =
+        torch::where(exposure != 0.0f, exposure.reciprocal(), torch::zeros_like(exposure));
     return (puDecodeOnDevice(v) * scale).clamp_max(std::numeric_limits<float>::max());
   }
   if (set.denoised() == "albedo") return srgbDecodeOnDevice(v).clamp_max(1.0f);
   return (v * 2.0f - 1.0f).clamp(-1.0f, 1.0f);
+}
+
+torch::Tensor oidnExposureOnDevice(const torch::Tensor& color) {
+  constexpr int64_t kBin = 16;
+  const int64_t height = color.size(-2), width = color.size(-1);
+  const torch::Tensor c = color.reshape({-1, height, width})
+                              .to(torch::kFloat)
+                              .nan_to_num(0.0, std::numeric_limits<float>::max(), 0.0)
+                              .clamp_min(0.0f);
+  const bool rgb = c.size(0) >= 3;
+  // Luminance in float, term by term as libtonemap sums it.
+  const torch::Tensor luminance =
+      c[0] * 0.212671f + c[rgb ? 1 : 0] * 0.715160f + c[rgb ? 2 : 0] * 0.072169f;
+  // Bin b of n along an axis of `size` spans [b size / n, (b + 1) size / n): a
+  // 0/1 matrix of bins by pixels, so that the bins' sums are two products in
+  // double (deterministic, unlike scattered atomic adds).
+  const auto longs = torch::TensorOptions().dtype(torch::kLong).device(color.device());
+  auto membership = [&](int64_t size) {
+    const int64_t bins = (size + kBin - 1) / kBin;
+    // Integer division, as libtonemap's: a tensor's `/` would divide exactly.
+    const torch::Tensor edges = torch::div(torch::arange(bins + 1, longs) * size, bins, "floor");
+    const torch::Tensor pixel = torch::arange(size, longs).unsqueeze(0);
+    return ((pixel >= edges.narrow(0, 0, bins).unsqueeze(1)) &
+            (pixel < edges.narrow(0, 1, bins).unsqueeze(1)))
+        .to(torch::kDouble);
+  };
+  const torch::Tensor rows = membership(height), columns = membership(width);
+  const torch::Tensor sums = rows.matmul(luminance.to(torch::kDouble)).matmul(columns.t());
+  const torch::Tensor counts = rows.sum(1).unsqueeze(1) * columns.sum(1).unsqueeze(0);
+  // Each bin's mean rounded to float, as libtonemap computes it.
+  const torch::Tensor mean = (sums.to(torch::kFloat) / counts.to(torch::kFloat)).to(torch::kDouble);
+  const torch::Tensor lit = mean > 1e-8f;
+  const torch::Tensor count = lit.sum().to(torch::kDouble);
+  const torch::Tensor logSum = torch::where(lit, mean.log2(), torch::zeros_like(mean)).sum();
+  const torch::Tensor exposure = 0.18 / torch::exp2(logSum / count.clamp_min(1.0));
+  return torch::where(count > 0, exposure, torch::ones_like(exposure)).to(torch::kFloat);
 }
 
 double oidnBytesPerPixel(const OidnUNetConfig& config) {
@@ -202,30 +266,46 @@ double oidnBytesPerPixel(const OidnUNetConfig& config) {
 OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers& frame,
                       const OidnRunOptions& options) {
   OidnRunResult result;
+  const bool onHost = options.device.is_cpu();
+  const bool colour = set.denoised() == "color";
+  // On a GPU each buffer crosses once, whole (tiles are views of it), and
+  // everything after runs there, the autoexposure too, up to the caller's
+  // one copy of the result back.
+  DeviceBuffers onDevice = options.onDevice;
+  torch::Tensor exposure;  // on the device
+  if (!onHost) {
+    RECORD_FUNCTION("dn::upload", std::vector<c10::IValue>());
+    for (const std::string& name : set.buffers)
+      if (!onDevice.count(name)) onDevice[name] = bufferOnDevice(frame.get(name), options.device);
+  }
   // Albedo and normal are denoised at their own scale, as OIDN does.
-  result.exposure = set.denoised() != "color" ? 1.0f
-                    : options.exposure > 0.0f ? options.exposure
-                                              : tonemap::oidnExposure(frame.get("color"));
+  if (!colour)
+    result.exposure = 1.0f;
+  else if (options.exposure > 0.0f)
+    result.exposure = options.exposure;
+  else if (onHost)
+    result.exposure = tonemap::oidnExposure(frame.get("color"));
+  else
+    exposure = oidnExposureOnDevice(onDevice.at("color"));
+  if (!onHost && !exposure.defined()) exposure = scalarOn(result.exposure, options.device);
+
   const OidnUNetConfig& config = net->config();
   const int64_t overlap = config.arch == OidnArch::Large ? kOidnOverlapLarge : kOidnOverlap;
   // The Tiler gives every pixel within overlap / 4 of an inner tile edge zero
   // weight: at four times OIDN's overlap, each pixel that counts has as much
   // context as OIDN gives it.
-  const Tiler tiler = tilerFor(frame, oidnBytesPerPixel(config), 4 * overlap, options);
+  const Tiler tiler =
+      planOidnTiles(frame.height, frame.width, oidnBytesPerPixel(config), 4 * overlap, options);
   result.tileSize = std::max(tiler.tiles().front().height, tiler.tiles().front().width);
   result.tileCount = tiler.tiles().size();
 
   std::size_t done = 0;
-  // On a GPU the buffers move as stored and everything after runs there, up to
-  // the caller's one copy of the result back.
-  const bool onHost = options.device.is_cpu();
   result.image = tiler.apply([&](const TileRect& r) {
     torch::Tensor x;
     {
       RECORD_FUNCTION("dn::oidnInput", std::vector<c10::IValue>());
-      x = onHost
-              ? oidnInput(frame, set, result.exposure, r)
-              : oidnInputOnDevice(frame, set, result.exposure, r, options.device, options.onDevice);
+      x = onHost ? oidnInput(frame, set, result.exposure, r)
+                 : oidnInputOnDevice(frame, set, exposure, r, options.device, onDevice);
       const int64_t padH = (kOidnAlignment - r.height % kOidnAlignment) % kOidnAlignment;
       const int64_t padW = (kOidnAlignment - r.width % kOidnAlignment) % kOidnAlignment;
       x = torch::constant_pad_nd(x, {0, padW, 0, padH}, 0.0)
@@ -240,10 +320,14 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
               .narrow(3, 0, r.width);
     }
     RECORD_FUNCTION("dn::oidnOutputDecode", std::vector<c10::IValue>());
-    torch::Tensor decoded = oidnOutputDecode(y, set, result.exposure);
+    torch::Tensor decoded = onHost ? oidnOutputDecode(y, set, result.exposure)
+                                   : oidnOutputDecodeOnDevice(y, set, exposure);
     if (options.progress) options.progress(double(++done) / tiler.tiles().size());
     return decoded;
   });
+  // The one value the host needs back, read once the frame's work is queued.
+  if (!onHost && colour && options.exposure <= 0.0f) result.exposure = exposure.item<float>();
+  result.exposureOnDevice = exposure;
   return result;
 }
 

@@ -8,6 +8,7 @@
 
 #include "dn/diffusion/refine.h"
 #include "dn/infer/control_inputs.h"
+#include "dn/infer/device.h"
 #include "dn/infer/light_paths.h"
 #include "dn/infer/noise_estimate.h"
 #include "dn/nn/model_inputs.h"
@@ -32,6 +33,52 @@ torch::Tensor cleanedAuxTensor(const OidnBase& base, const char* setName, const 
 Image cleanedAux(const OidnBase& base, const char* setName, const FrameBuffers& frame,
                  const OidnRunOptions& options) {
   return tensorToImage(cleanedAuxTensor(base, setName, frame, options));
+}
+
+// The Control Module's own convolutions in channels-last order on a GPU, as
+// the base's and their input are (no conversions inside each call); on the
+// CPU as they were trained, so that its result there stays bit for bit.
+// Called where Module::to just moved the weights, in the same inference
+// mode, so that their data is replaced as `to` replaced it.
+void useLayoutFor(torch::nn::Module& module, torch::Device device) {
+  const auto format =
+      device.is_cpu() ? torch::MemoryFormat::Contiguous : torch::MemoryFormat::ChannelsLast;
+  torch::NoGradGuard noGrad;
+  for (auto& p : module.parameters())
+    if (p.dim() == 4 && !p.is_contiguous(format)) p.set_data(p.contiguous(format));
+}
+
+torch::ScalarType innerPrecisionOf(Precision precision) {
+  switch (precision) {
+    case Precision::BFloat16:
+      return torch::kBFloat16;
+    case Precision::Float16:
+      return torch::kHalf;
+    default:
+      return torch::kFloat;
+  }
+}
+
+// The settings of the networks' calls for this denoise; half is refused off
+// CUDA before any work (LibTorch's CPU convolutions in half are slow or missing).
+void applyRunSettings(OidnBase base, const DenoiseOptions& options) {
+  if (options.precision == Precision::Float16 && !options.device.is_cuda())
+    throw std::invalid_argument("precision fp16: half runs on CUDA only (on the " +
+                                options.device.str() + ": float or bf16)");
+  base->useInnerPrecision(innerPrecisionOf(options.precision));
+  if (options.device.is_cuda()) at::globalContext().setBenchmarkCuDNN(options.cudnnBenchmark);
+}
+
+// The networks' memory budget and tile cap: on CUDA by default a share of
+// what the device has free (a 4K frame runs whole on a large GPU), else (or
+// where this build cannot ask) maxMemoryBytes with OIDN's CPU tiling.
+void setMemoryBudget(OidnRunOptions& run, const DenoiseOptions& options) {
+  run.maxMemoryBytes = options.maxMemoryBytes;
+  if (!options.device.is_cuda() || !options.budgetFromFreeMemory) return;
+  if (const std::optional<double> free = freeDeviceMemory(options.device)) {
+    run.maxMemoryBytes = deviceMemoryBudget(*free);
+    run.maxTilePixels = 0;
+  }
 }
 
 // The caller's exposure, checked against OIDN's autoexposure of the frame; 0 stays automatic.
@@ -188,7 +235,7 @@ double OidnPipeline::bytesPerPixel() const {
 // Steps 1 to 4; step 5 when the gate opens or the caller asks for it.
 DenoiseResult OidnPipeline::denoise(const FrameBuffers& frame,
                                     const DenoiseOptions& options) const {
-  OidnBase(base_)->useBFloat16(options.bfloat16);  // a setting of the networks' calls
+  applyRunSettings(base_, options);
   const bool control = controlApplies(frame.names());
   // The Control Module's extra buffers are read when it steers (FrameBuffers::unread).
   const std::vector<std::string>& extras = info_.oidn.control.extra_buffers;
@@ -209,7 +256,7 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   run.device = options.device;
   run.exposure = checkedExposure(options, frame);
   run.tile = options.tile;
-  run.maxMemoryBytes = options.maxMemoryBytes;
+  setMemoryBudget(run, options);
   run.progress = options.progress;
   auto [net, set] = base_->pick(frame.names());
   DenoiseResult result;
@@ -222,9 +269,12 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   OidnRunResult out;
   if (result.prefiltered) {
     FrameBuffers clean;
-    out = runOidnPrefiltered(base_, frame, run, result.lightPathsSplit, &clean);
-    result.cleanAlbedo = std::move(clean.buffers.at("albedo"));
-    result.cleanNormal = std::move(clean.buffers.at("normal"));
+    out = runOidnPrefiltered(base_, frame, run, result.lightPathsSplit,
+                             options.returnCleanAux ? &clean : nullptr);
+    if (options.returnCleanAux) {
+      result.cleanAlbedo = std::move(clean.buffers.at("albedo"));
+      result.cleanNormal = std::move(clean.buffers.at("normal"));
+    }
   } else {
     net->to(options.device);
     out = runOidn(net, *set, frame, run);
@@ -239,8 +289,8 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
     result.buffersUsed.insert(result.buffersUsed.end(), diffusePassBuffers().begin(),
                               diffusePassBuffers().end());
   if (controlApplies(frame.names()) && options.control == ControlUse::Auto) {
-    // Compared where the base works: exposed and PU-encoded.
-    const torch::Tensor input = imageToTensor(frame.get("color")) * out.exposure;
+    // Compared where the base works: exposed and PU-encoded, on the run's device.
+    const torch::Tensor input = imageToDevice(frame.get("color"), options.device) * out.exposure;
     result.noiseLeft = measureNoiseLeft(puEncode(input.nan_to_num(0.0).clamp_min(0.0)),
                                         puEncode(out.image * out.exposure), frame);
   }
@@ -254,53 +304,68 @@ DenoiseResult OidnPipeline::denoiseWithControl(const FrameBuffers& frame,
   base_->net(config.input_set);  // the steered network, handed out: in the base's weight layout
   OidnControlled model = controlled_;
   model->to(options.device);
+  useLayoutFor(*model->control(), options.device);
   const OidnInputSet& set = oidnInputSet(config.input_set);
   const std::vector<double> sigmas =
       config.diffusion ? options.sigmas.value_or(info_.oidn.sigmas) : std::vector<double>{};
   checkSigmas(sigmas);
   const int samples = sigmas.empty() ? 1 : options.samples;
   const float requested = checkedExposure(options, frame);
-  const float exposure = requested > 0 ? requested : tonemap::oidnExposure(frame.get("color"));
-  const torch::Tensor exposures = torch::tensor({exposure});
-
+  const bool onHost = options.device.is_cpu();
   OidnRunOptions run;
   run.device = options.device;
-  run.exposure = exposure;
   run.tile = options.tile;
+  setMemoryBudget(run, options);
   OidnRunOptions auxRun = run;
-  auxRun.maxMemoryBytes = options.maxMemoryBytes;
   // The control's encoder copy and the hint network run beside the base.
-  run.maxMemoryBytes = options.maxMemoryBytes / 1.5;
+  run.maxMemoryBytes /= 1.5;
+  // On a GPU the colour, the extra buffers and the noise cross once per frame
+  // and the hint is made there; on the CPU from each tile's pixels.
+  torch::Tensor exposures, extrasOnDevice, presentOnDevice;
+  if (onHost) {
+    run.exposure = requested > 0 ? requested : tonemap::oidnExposure(frame.get("color"));
+    exposures = torch::tensor({run.exposure});
+  } else {
+    run.onDevice["color"] = bufferOnDevice(frame.get("color"), options.device);
+    exposures =
+        (requested > 0 ? torch::full({}, requested, torch::TensorOptions().device(options.device))
+                       : oidnExposureOnDevice(run.onDevice["color"]))
+            .view({1});
+    run.exposure = exposures.item<float>();  // before the networks: the host needs it as a number
+    std::tie(extrasOnDevice, presentOnDevice) = frameExtrasOnDevice(frame, config, options.device);
+  }
   torch::Tensor noise;  // full-frame, so that overlapping tiles agree
   run.network = [&](const torch::Tensor& x, const TileRect& r) {
-    // The hint is made on the CPU (the PU curve runs there) and moved.
-    auto [extras, present] = frameExtras(frame, config, r);
+    auto [extras, present] = onHost ? frameExtras(frame, config, r)
+                                    : std::make_pair(crop(extrasOnDevice, r), presentOnDevice);
     const std::vector<int64_t> pad = {0, x.size(3) - r.width, 0, x.size(2) - r.height};
     extras = torch::constant_pad_nd(extras, pad, 0.0);
+    // The extras' share of the hint: once per tile, not once per refinement step.
+    const torch::Tensor hint = controlHintExtras(config, extras, present, exposures).to(x.device());
     const auto features = model->steered()->encode(x);
-    if (!config.diffusion)
-      return model->decode(features, x,
-                           controlHint(config, extras, present, exposures).to(x.device()));
+    if (!config.diffusion) return model->decode(features, x, hint);
     const torch::Tensor start = model->steered()->decode(features);
-    const torch::Tensor tileNoise =
-        torch::constant_pad_nd(noise.narrow(2, r.y0, r.height).narrow(3, r.x0, r.width), pad, 0.0)
-            .to(x.device());
+    const torch::Tensor tileNoise = torch::constant_pad_nd(crop(noise, r), pad, 0.0).to(x.device());
+    const auto floats = x.options().dtype(torch::kFloat);
     return refine(start, tileNoise, sigmas, [&](const torch::Tensor& state, double sigma) {
-      const torch::Tensor hint =
-          controlHint(config, extras, present, exposures, state.cpu(), torch::full({1}, sigma));
-      return model->decode(features, x, hint.to(x.device()));
+      return model->decode(features, x,
+                           withDiffusionState(hint, state, torch::full({1}, sigma, floats)));
     });
   };
 
   // A module over the prefilter mode's network sees the guides cleaned, as it trained.
   FrameBuffers cleaned;
-  if (set.cleanAux) cleaned = withCleanAux(base_, frame, auxRun, auxRun);
-  const FrameBuffers& input = set.cleanAux ? cleaned : frame;
+  if (set.cleanAux && onHost) cleaned = withCleanAux(base_, frame, auxRun, auxRun);
+  if (set.cleanAux && !onHost)  // kept on the device for the steered network
+    for (const auto& [aux, setName] : {std::pair("albedo", "alb"), std::pair("normal", "nrm")})
+      run.onDevice[aux] = cleanedAuxTensor(base_, setName, frame, auxRun).squeeze(0);
+  const FrameBuffers& input = set.cleanAux && onHost ? cleaned : frame;
   torch::Tensor sum, sumSquares;
   OidnRunResult out;
   for (int k = 0; k < samples; ++k) {
     auto generator = at::detail::createCPUGenerator(options.seed + uint64_t(k));
-    noise = torch::randn({1, 3, frame.height, frame.width}, generator);
+    // Drawn on the CPU, so that every device refines from the same noise.
+    noise = torch::randn({1, 3, frame.height, frame.width}, generator).to(options.device);
     if (options.progress) run.progress = [&, k](double f) { options.progress((k + f) / samples); };
     OidnUNet steered = model->steered();
     out = runOidn(steered, set, input, run);

@@ -302,4 +302,29 @@ void writeImage(const std::string& path, const Image& image, DType dtype) {
   write(path, {image.height, image.width, image.channels}, image.pixels, dtype);
 }
 
+FrameBuffers readFrameFolder(const std::string& dir) {
+  FrameBuffers frame;
+  const std::string colorPath = dir + "/color.npy";
+  if (!std::ifstream(colorPath)) throw NpyError(colorPath + ": missing (the colour is required)");
+  for (const BufferSpec& spec : canonicalBuffers()) {
+    const std::string path = dir + "/" + spec.name + ".npy";
+    if (!std::ifstream(path)) continue;
+    Image image = readImage(path);
+    if (image.channels != spec.channels)
+      throw NpyError(path + ": " + std::to_string(image.channels) + " channels, " + spec.name +
+                     " has " + std::to_string(spec.channels));
+    if (frame.buffers.empty()) {
+      frame.width = image.width;
+      frame.height = image.height;
+    } else if (image.width != frame.width || image.height != frame.height) {
+      throw NpyError(path + ": " + std::to_string(image.width) + "x" +
+                     std::to_string(image.height) + ", the colour is " +
+                     std::to_string(frame.width) + "x" + std::to_string(frame.height));
+    }
+    frame.buffers[spec.name] = std::move(image);
+  }
+  frame.dataWindow = frame.displayWindow = {0, 0, frame.width, frame.height};
+  return frame;
+}
+
 }  // namespace dn::npy

@@ -2,6 +2,8 @@
 
 #include <ATen/Parallel.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 
@@ -135,7 +137,24 @@ torch::Tensor imageToTensor(const Image& image) {
   return imageRegionToTensor(image, 0, 0, image.height, image.width);
 }
 
+namespace {
+
+Image deviceTensorToImage(const torch::Tensor& tensor) {
+  // Interleaved where the tensor is, so that the host only copies.
+  const torch::Tensor hwc = tensor.squeeze(0).to(torch::kFloat32).permute({1, 2, 0}).contiguous();
+  const int64_t height = hwc.size(0), width = hwc.size(1), channels = hwc.size(2);
+  Image image(static_cast<int>(width), static_cast<int>(height), static_cast<int>(channels));
+  const torch::Tensor staging = torch::empty(
+      hwc.sizes(), torch::TensorOptions().dtype(torch::kFloat).pinned_memory(tensor.is_cuda()));
+  staging.copy_(hwc);  // waits for the device
+  torch::from_blob(image.pixels.data(), hwc.sizes()).copy_(staging);
+  return image;
+}
+
+}  // namespace
+
 Image tensorToImage(const torch::Tensor& tensor) {
+  if (!tensor.is_cpu()) return deviceTensorToImage(tensor);
   const auto chw = tensor.squeeze(0).to(torch::kCPU, torch::kFloat32).contiguous();
   const int64_t channels = chw.size(0), height = chw.size(1), width = chw.size(2);
   Image image(static_cast<int>(width), static_cast<int>(height), static_cast<int>(channels));
@@ -150,6 +169,45 @@ Image tensorToImage(const torch::Tensor& tensor) {
       }
   });
   return image;
+}
+
+torch::Tensor stageImage(const Image& image, bool pinned) {
+  const std::vector<int64_t> shape = {image.height, image.width, image.channels};
+  const auto options = torch::TensorOptions().pinned_memory(pinned);
+  const float* from = image.pixels.data();
+  const int64_t count = static_cast<int64_t>(image.pixels.size());
+  torch::Tensor half = torch::empty(shape, options.dtype(torch::kHalf));
+  at::Half* to = half.data_ptr<at::Half>();
+  std::atomic<bool> exact{true};
+  constexpr int64_t kBlock = 1 << 12;  // checked a block at a time: the loop stays branch-free
+  at::parallel_for(0, (count + kBlock - 1) / kBlock, 16, [&](int64_t first, int64_t last) {
+    for (int64_t block = first; block < last && exact.load(std::memory_order_relaxed); ++block) {
+      bool same = true;
+      const int64_t end = std::min(count, (block + 1) * kBlock);
+      for (int64_t i = block * kBlock; i < end; ++i) {
+        const at::Half h(from[i]);
+        same &= static_cast<float>(h) == from[i] || std::isnan(from[i]);
+        to[i] = h;
+      }
+      if (!same) exact.store(false, std::memory_order_relaxed);
+    }
+  });
+  if (exact) return half;
+  torch::Tensor full = torch::empty(shape, options.dtype(torch::kFloat));
+  full.copy_(torch::from_blob(const_cast<float*>(from), shape));
+  return full;
+}
+
+torch::Tensor imageToDevice(const Image& image, torch::Device device) {
+  if (device.is_cpu()) return imageToTensor(image);
+  const bool pinned = device.is_cuda();
+  // Pinned memory goes back to LibTorch's caching host allocator only once
+  // the copy that reads it has run, so the staging tensor may go now.
+  return stageImage(image, pinned)
+      .to(device, /*non_blocking=*/pinned)
+      .to(torch::kFloat)
+      .permute({2, 0, 1})
+      .unsqueeze(0);
 }
 
 torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,

@@ -5,6 +5,7 @@
 #include <cpuid.h>
 #endif
 #include <stdexcept>
+#include <utility>
 
 namespace dn {
 namespace {
@@ -129,25 +130,68 @@ OidnUNetImpl::OidnUNetImpl(const OidnUNetConfig& config) : config_(config) {
   bottleneck_ = {"enc_conv5a", "enc_conv5b"};
 }
 
-bool OidnUNetImpl::inBFloat16(const std::string& name) const {
+void OidnUNetImpl::useInnerPrecision(torch::ScalarType type) {
+  if (type != torch::kFloat && type != torch::kBFloat16 && type != torch::kHalf)
+    throw std::invalid_argument(std::string("OIDN network: no inner precision ") +
+                                c10::toString(type) + " (float, bfloat16 or half)");
+  if (type == inner_) return;  // the copies stay: each is remade when its weight changes
+  inner_ = type;
+  reduced_.clear();
+  folded_.clear();
+}
+
+bool OidnUNetImpl::inReducedPrecision(const std::string& name) const {
   // The first and the output convolution stay in float: the input and the
   // result are not rounded to bfloat16's 8-bit mantissa (with them in
   // bfloat16 a clean frame lost 0.4 dB). They are cheap: 9 input, 3 output channels.
-  return bfloat16_ && name != oidnConvs(config_).front().name &&
+  return inner_ != torch::kFloat && name != oidnConvs(config_).front().name &&
          name != oidnConvs(config_).back().name;
 }
 
+namespace {
+
+// Tensors made in inference mode (weights moved to a GPU there) have no
+// version counter; their storage is what tells them apart.
+int64_t versionOf(const torch::Tensor& t) { return t.is_inference() ? 0 : t._version(); }
+
+// Whether `derived` was made from `source` as it is now, in `type` on its device.
+bool upToDate(const torch::Tensor& derived, const void* madeFrom, int64_t version,
+              const torch::Tensor& source, torch::ScalarType type) {
+  return derived.defined() && madeFrom == source.data_ptr() && version == versionOf(source) &&
+         derived.scalar_type() == type && derived.device() == source.device();
+}
+
+}  // namespace
+
 OidnUNetImpl::Weights OidnUNetImpl::weights(const std::string& name) {
   const OidnConv3x3& c = convs_.at(name);
-  if (!inBFloat16(name)) return {c->weight, c->bias};
-  auto it = bfloat16Weights_.find(name);
-  if (it == bfloat16Weights_.end() || !it->second.weight.is_same_size(c->weight) ||
-      it->second.weight.device() != c->weight.device())
-    it = bfloat16Weights_
-             .insert_or_assign(
-                 name, Weights{c->weight.to(torch::kBFloat16), c->bias.to(torch::kBFloat16)})
-             .first;
-  return it->second;
+  if (!inReducedPrecision(name)) return {c->weight, c->bias};
+  Derived& d = reduced_[name];
+  if (!upToDate(d.weights.weight, d.source, d.version, c->weight, inner_)) {
+    d.weights = {c->weight.to(inner_), c->bias.to(inner_)};
+    d.source = c->weight.data_ptr();
+    d.version = versionOf(c->weight);
+  }
+  return d.weights;
+}
+
+torch::Tensor OidnUNetImpl::foldedWeight(const std::string& name, int64_t coarseChannels,
+                                         torch::MemoryFormat format) {
+  const OidnConv3x3& c = convs_.at(name);
+  const torch::ScalarType type = inReducedPrecision(name) ? inner_ : torch::kFloat;
+  Derived& d = folded_[name];
+  // Folded while the weights train would keep a stale copy: only reused
+  // where no gradient flows (inference, the frozen base).
+  const bool reusable = !torch::GradMode::is_enabled() || !c->weight.requires_grad();
+  if (!reusable || !upToDate(d.weights.weight, d.source, d.version, c->weight, type) ||
+      !d.weights.weight.is_contiguous(format)) {
+    const torch::Tensor weight = weights(name).weight;
+    d.weights.weight = foldUpsampling(weight.narrow(1, 0, coarseChannels)).contiguous(format);
+    d.source = c->weight.data_ptr();
+    d.version = versionOf(c->weight);
+    if (!reusable) return std::exchange(d.weights.weight, torch::Tensor());
+  }
+  return d.weights.weight;
 }
 
 torch::Tensor OidnUNetImpl::conv(const std::string& name, const torch::Tensor& x) {
@@ -173,7 +217,7 @@ torch::Tensor OidnUNetImpl::upConv(const std::string& name, const torch::Tensor&
   // The upsampled share: each phase from the coarse input, padded by one so
   // that phase (py, px) is the window starting at (py, px). One phase at a
   // time: at full resolution the four at once were the network's peak memory.
-  const torch::Tensor folded = foldUpsampling(p.weight.narrow(1, 0, ch)).contiguous(format);
+  const torch::Tensor folded = foldedWeight(name, ch, format);
   const torch::Tensor input = coarse.to(type);
   const torch::Tensor fine = out.view({batch, outCh, h, 2, w, 2});
   for (int64_t py = 0; py < 2; ++py)
@@ -288,8 +332,8 @@ OidnUNet OidnBaseImpl::net(const std::string& inputSet) const {
   return net;
 }
 
-void OidnBaseImpl::useBFloat16(bool on) {
-  for (auto& [name, net] : nets_) net->useBFloat16(on);
+void OidnBaseImpl::useInnerPrecision(torch::ScalarType type) {
+  for (auto& [name, net] : nets_) net->useInnerPrecision(type);
 }
 
 bool cpuHasBFloat16Matrix() {

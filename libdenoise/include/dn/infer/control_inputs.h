@@ -14,7 +14,8 @@
 namespace dn {
 
 // OIDN's PU transfer function and its inverse, elementwise on CPU float tensors
-// (NaN and negatives as 0 on the way in).
+// (NaN and negatives as 0 on the way in); puEncode takes any device (off the
+// CPU the same formulas in tensor operations, to float rounding).
 torch::Tensor puEncode(const torch::Tensor& radiance);
 torch::Tensor puDecode(const torch::Tensor& encoded);
 
@@ -38,11 +39,23 @@ torch::Tensor cleanAux(const OidnBase& base, const torch::Tensor& albedo,
 torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& extras,
                           const torch::Tensor& present, const torch::Tensor& exposure,
                           const torch::Tensor& state = {}, const torch::Tensor& sigma = {});
+// controlHint in two parts, for a refinement that changes only the state: the
+// extras and their flags, made once ...
+torch::Tensor controlHintExtras(const OidnControlConfig& config, const torch::Tensor& extras,
+                                const torch::Tensor& present, const torch::Tensor& exposure);
+// ... and with each step's state (B, 3, H, W) and level (B) after them.
+torch::Tensor withDiffusionState(const torch::Tensor& hintExtras, const torch::Tensor& state,
+                                 const torch::Tensor& sigma);
 
 // The extra buffers of a region of `frame` (zeros where absent) and their flags.
 std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
                                                     const OidnControlConfig& config,
                                                     const TileRect& region);
+// The same over the whole frame on `device` (each buffer crossing as
+// imageToDevice sends it): tiles take views of it.
+std::pair<torch::Tensor, torch::Tensor> frameExtrasOnDevice(const FrameBuffers& frame,
+                                                            const OidnControlConfig& config,
+                                                            torch::Device device);
 
 // The noise level as the hint network sees it (levels of a few hundredths).
 constexpr double kSigmaInputScale = 10.0;

@@ -34,6 +34,17 @@ enum class Quality {
 // Quality by name ("fast", "balanced", "high"); std::nullopt for another name.
 std::optional<Quality> qualityFromName(const std::string& name);
 
+// The precision of the OIDN networks' inner convolutions; the first and the
+// output convolution stay in float.
+enum class Precision {
+  Float,     // OIDN's result to float rounding (the default)
+  BFloat16,  // float accumulation; about twice as fast on CPUs with AMX
+  Float16,   // half, as OIDN's CUDA device runs its networks: CUDA only
+};
+// By name ("float", "bf16", "fp16"); std::nullopt for another name.
+std::optional<Precision> precisionFromName(const std::string& name);
+const char* precisionName(Precision precision);
+
 // The from-scratch diffusion model's sampling (dn/infer/scratch_diffusion.h);
 // other models ignore it.
 struct ScratchSampling {
@@ -66,11 +77,15 @@ struct DenoiseOptions {
   // prefilter mode per frame, for 0.04 to 0.18 dB.
   bool lightPaths = false;
   ControlUse control = ControlUse::Auto;
-  // OIDN base: the networks' inner convolutions in bfloat16 with float
-  // accumulation (dn::OidnUNetImpl::useBFloat16): about twice as fast where
-  // the CPU has AMX (dn::cpuHasBFloat16Matrix), no longer OIDN's result bit
-  // for bit (docs/dndenoise.md#speed-and-memory has its quality).
-  bool bfloat16 = false;
+  // OIDN base: the networks' inner convolutions (dn::OidnUNetImpl::useInnerPrecision).
+  Precision precision = Precision::Float;
+  // Prefiltered: the cleaned albedo and normal in DenoiseResult, for a
+  // second denoising of the frame (a sequence's accumulated render); off, a
+  // GPU need not copy them back.
+  bool returnCleanAux = true;
+  // CUDA: cuDNN times its algorithms for each new shape and keeps the fastest
+  // (the first frame of a size pays for it). A process-wide setting of LibTorch.
+  bool cudnnBenchmark = true;
   // Models with a diffusion Control Module: the noise levels of the
   // refinement, noisiest first; unset: the model's own; empty: none.
   std::optional<std::vector<double>> sigmas;
@@ -82,9 +97,13 @@ struct DenoiseOptions {
   double exposure = 0.0;
   uint64_t seed = 0;     // same seed, same output
   int samples = 1;       // K > 1: mean of K samples and their standard deviation
-  int64_t tile = 0;      // network tile size; 0 = derived from maxMemoryBytes
+  int64_t tile = 0;      // network tile size; 0 = derived from the memory budget
   int64_t overlap = 32;  // tile overlap in pixels (the from-scratch model; OIDN's own otherwise)
-  double maxMemoryBytes = 3.0e9;
+  double maxMemoryBytes = 3.0e9;  // the networks' activations on the CPU, or as below
+  // CUDA: the budget is a share of the device's free memory when the frame
+  // is denoised (deviceMemoryBudget), not maxMemoryBytes; a large GPU then
+  // runs a 4K frame as one tile. False: maxMemoryBytes there too.
+  bool budgetFromFreeMemory = true;
   // Where the networks run; the from-scratch model runs on the CPU only.
   torch::Device device = torch::kCPU;
   std::function<void(double fraction)> progress;  // 0..1, after every network step

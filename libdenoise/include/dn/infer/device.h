@@ -5,6 +5,7 @@
 
 #include <torch/torch.h>
 
+#include <optional>
 #include <string>
 
 namespace dn {
@@ -16,5 +17,12 @@ torch::Device parseDevice(const std::string& name);
 
 // Throws std::invalid_argument unless tensors can be placed on `device`.
 void checkDeviceAvailable(const torch::Device& device);
+
+// Bytes a CUDA device can still give this process: what its driver reports
+// free plus what LibTorch's caching allocator holds unused (so that a second
+// frame sees the memory the first one left cached). std::nullopt where this
+// build cannot ask (configured without the CUDA runtime's headers). Throws
+// std::invalid_argument for another device.
+std::optional<double> freeDeviceMemory(const torch::Device& device);
 
 }  // namespace dn

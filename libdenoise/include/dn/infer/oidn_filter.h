@@ -35,13 +35,20 @@ torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, floa
 // Buffers already on the run's device, by name: (3, H, W) over the whole
 // frame in the frame's units, taken instead of the frame's images.
 using DeviceBuffers = std::map<std::string, torch::Tensor>;
+// A buffer of the frame on `device` as DeviceBuffers holds it: its stored
+// channels cross, in half where every value is one (dn::imageToDevice), and a
+// single channel is broadcast there.
+torch::Tensor bufferOnDevice(const Image& image, torch::Device device);
 // The same made on `device` with tensor operations from the buffers as
 // stored: what crosses to a GPU is the region's raw pixels, or nothing for
 // the buffers in `onDevice`. Agrees with oidnInput to float rounding of the
-// curves (test_oidn_base).
+// curves (test_oidn_base). `exposure` may be a 0-dim float tensor on `device`.
 torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
                                 const TileRect& region, torch::Device device,
                                 const DeviceBuffers& onDevice = {});
+torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set,
+                                const torch::Tensor& exposure, const TileRect& region,
+                                torch::Device device, const DeviceBuffers& onDevice = {});
 // Network output (1, 3, h, w) -> the set's denoised buffer in the frame's
 // units: linear HDR radiance, albedo in [0, 1] or normals in [-1, 1]. A CPU
 // output is decoded on the CPU, any other where it is
@@ -50,11 +57,23 @@ torch::Tensor oidnOutputDecode(const torch::Tensor& output, const OidnInputSet& 
                                float exposure);
 torch::Tensor oidnOutputDecodeOnDevice(const torch::Tensor& output, const OidnInputSet& set,
                                        float exposure);
+torch::Tensor oidnOutputDecodeOnDevice(const torch::Tensor& output, const OidnInputSet& set,
+                                       const torch::Tensor& exposure);
+// OIDN's PU transfer function (tonemap::pu) in tensor operations on any
+// device, on values already made finite and clamped at 0.
+torch::Tensor puEncodeTensor(const torch::Tensor& radiance);
+// OIDN's autoexposure (tonemap::oidnExposure) of a colour (C, H, W) or
+// (1, C, H, W) where it is, as a 0-dim float tensor there: the bins' sums in
+// double, so it agrees with the CPU's to float rounding, and no value has to
+// come back to the host before the networks run.
+torch::Tensor oidnExposureOnDevice(const torch::Tensor& color);
 
 struct OidnRunOptions {
   float exposure = 0.0f;          // 0: OIDN's autoexposure
-  int64_t tile = 0;               // 0: the whole frame up to kOidnMaxTilePixels, or
+  int64_t tile = 0;               // 0: the whole frame up to maxTilePixels, or
   double maxMemoryBytes = 3.0e9;  //    the largest tile under this budget
+  // OIDN's CPU tiling; 0: no cap (a GPU's memory budget alone decides).
+  int64_t maxTilePixels = kOidnMaxTilePixels;
   torch::Device device = torch::kCPU;
   std::function<void(double)> progress;  // 0..1 after every tile
   // Replaces `net` on each tile: the padded input (1, C, h, w) and the tile's
@@ -67,6 +86,7 @@ struct OidnRunOptions {
 struct OidnRunResult {
   torch::Tensor image;  // (1, 3, H, W) on the run's device: the set's denoised buffer
   float exposure = 1.0f;
+  torch::Tensor exposureOnDevice;  // the same as a 0-dim tensor there (off the CPU)
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
 };
@@ -78,5 +98,17 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
 
 // Activation bytes per pixel of one forward pass of `config`, for tiling.
 double oidnBytesPerPixel(const OidnUNetConfig& config);
+
+// The tiles runOidn runs a frame of height x width in: options.tile, else the
+// whole frame where it fits maxMemoryBytes (and maxTilePixels), else the
+// layout that runs the networks over the fewest pixels. `blend`: the overlap.
+Tiler planOidnTiles(int64_t height, int64_t width, double bytesPerPixel, int64_t blend,
+                    const OidnRunOptions& options);
+
+// The share of a GPU's free memory the networks' activations may take: the
+// rest holds the frame's buffers there, cuDNN's workspaces (its benchmark
+// mode tries algorithms that need more) and what other processes allocate.
+constexpr double kDeviceBudgetShare = 0.5;
+double deviceMemoryBudget(double freeBytes);
 
 }  // namespace dn

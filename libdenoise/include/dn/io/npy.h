@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "dn/image.h"
+#include "dn/io/buffers.h"
 
 namespace dn::npy {
 
@@ -35,6 +36,12 @@ void write(const std::string& path, const std::vector<int64_t>& shape,
 // An image as a (height, width, channels) array; (height, width) reads as one channel.
 Image readImage(const std::string& path);
 void writeImage(const std::string& path, const Image& image, DType dtype = DType::Float32);
+
+// A frame as a folder of <canonical buffer name>.npy files (color.npy,
+// albedo.npy, ...; other files are ignored), each (height, width, channels)
+// of the buffer's channel count and all of the colour's size. Throws NpyError
+// naming the file that is missing, malformed or of another shape.
+FrameBuffers readFrameFolder(const std::string& dir);
 
 // IEEE 754 binary16 conversions (round to nearest even), as numpy's float16.
 float halfToFloat(uint16_t half);

@@ -77,16 +77,17 @@ class OidnUNetImpl : public torch::nn::Module {
 
   const OidnUNetConfig& config() const { return config_; }
 
-  // Inner convolutions in bfloat16 (float accumulation; copies of the float
-  // weights made on first use): about twice as fast where the CPU multiplies
-  // bfloat16 matrices (cpuHasBFloat16Matrix). The first and the output
-  // convolution and the input's share of the last decoder level stay in
-  // float; outputs are float. Off: float throughout, bit for bit as before.
-  void useBFloat16(bool on) {
-    bfloat16_ = on;
-    bfloat16Weights_.clear();  // the float weights may have changed since
-  }
-  bool usesBFloat16() const { return bfloat16_; }
+  // Inner convolutions in a reduced precision, kBFloat16 or kHalf (float
+  // accumulation; copies of the float weights made on first use): bfloat16 is
+  // about twice as fast where the CPU multiplies bfloat16 matrices
+  // (cpuHasBFloat16Matrix); half is what OIDN's CUDA device runs, on a GPU
+  // only. The first and the output convolution and the input's share of the
+  // last decoder level stay in float; outputs are float. kFloat: float
+  // throughout, bit for bit as before.
+  void useInnerPrecision(torch::ScalarType type);
+  torch::ScalarType innerPrecision() const { return inner_; }
+  void useBFloat16(bool on) { useInnerPrecision(on ? torch::kBFloat16 : torch::kFloat); }
+  bool usesBFloat16() const { return inner_ == torch::kBFloat16; }
   // Weights in channels-last order: faster convolutions on the CPU. Once.
   void useChannelsLast();
 
@@ -94,8 +95,19 @@ class OidnUNetImpl : public torch::nn::Module {
   struct Weights {
     torch::Tensor weight, bias;
   };
-  bool inBFloat16(const std::string& name) const;
+  // A copy made from a float weight, remade when that weight changes (its
+  // storage, version, device or layout) or the precision does.
+  struct Derived {
+    Weights weights;
+    const void* source = nullptr;
+    int64_t version = 0;
+  };
+  bool inReducedPrecision(const std::string& name) const;
   Weights weights(const std::string& name);  // in the convolution's precision
+  // The upsampled share of an upConv's weight folded into four 2x2 phases, in
+  // its precision and layout: made once, not on every call.
+  torch::Tensor foldedWeight(const std::string& name, int64_t coarseChannels,
+                             torch::MemoryFormat format);
   torch::Tensor conv(const std::string& name, const torch::Tensor& x);
   // conv(name, cat(upsample2x(coarse), skip)) without the upsampled copy.
   torch::Tensor upConv(const std::string& name, const torch::Tensor& coarse,
@@ -106,9 +118,10 @@ class OidnUNetImpl : public torch::nn::Module {
   std::vector<std::string> bottleneck_;            // at the coarsest level
   std::vector<std::vector<std::string>> decoder_;  // per level, after upsampling and concat
   std::map<std::string, OidnConv3x3> convs_;
-  bool bfloat16_ = false;
+  torch::ScalarType inner_ = torch::kFloat;
   bool channelsLast_ = false;
-  std::map<std::string, Weights> bfloat16Weights_;
+  std::map<std::string, Derived> reduced_;
+  std::map<std::string, Derived> folded_;
 };
 TORCH_MODULE(OidnUNet);
 
@@ -146,8 +159,9 @@ class OidnBaseImpl : public torch::nn::Module {
   // network is converted when net() or pick() first hands it out, so that a
   // run converts only the networks it uses.
   void useChannelsLast() { channelsLast_ = true; }
-  // Every network's inner convolutions in bfloat16 (OidnUNetImpl::useBFloat16).
-  void useBFloat16(bool on);
+  // Every network's inner convolutions in `type` (OidnUNetImpl::useInnerPrecision).
+  void useInnerPrecision(torch::ScalarType type);
+  void useBFloat16(bool on) { useInnerPrecision(on ? torch::kBFloat16 : torch::kFloat); }
 
  private:
   std::vector<std::string> sets_;
