@@ -47,6 +47,9 @@ std::optional<double> freeDeviceMemory(const torch::Device& device) {
   std::size_t free = 0, total = 0;
   if (cudaMemGetInfo(&free, &total) != cudaSuccess)
     throw std::runtime_error("device '" + device.str() + "': cudaMemGetInfo failed");
+  // The caching allocator answers only once a first allocation has set it up
+  // ("Invalid device argument" otherwise).
+  (void)torch::empty({1}, torch::TensorOptions().device(device));
   const auto stats =
       c10::cuda::CUDACachingAllocator::getDeviceStats(guard.current_device().index());
   constexpr std::size_t kAggregate = 0;  // StatType::AGGREGATE: all pools together
