@@ -189,21 +189,10 @@ TEST_CASE("half precision runs on CUDA only: refused elsewhere in one line, befo
   }
 }
 
-TEST_CASE("images cross to a device in half only where every value is a half") {
+TEST_CASE("images cross to a device exactly") {
   Image image = randomImage(37, 11, 3, 4.0, 21);
-  for (float& v : image.pixels) v = static_cast<float>(at::Half(v));  // a render saved in half
   image.pixels[5] = NAN;
-  torch::Tensor staged = stageImage(image, false);
-  CHECK((staged.scalar_type() == torch::kHalf));
-  const bool interleaved = staged.sizes() == torch::IntArrayRef({11, 37, 3});
-  CHECK(interleaved);
-  const torch::Tensor back = staged.to(torch::kFloat).flatten();
   const torch::Tensor original = torch::from_blob(image.pixels.data(), {int64_t(image.size())});
-  CHECK(torch::equal(back.nan_to_num(0), original.nan_to_num(0)));
-  image.pixels[image.size() - 1] = 1.0f + 1e-6f;  // one value that half would round
-  staged = stageImage(image, false);
-  CHECK((staged.scalar_type() == torch::kFloat));
-  CHECK(torch::equal(staged.flatten().nan_to_num(0), original.nan_to_num(0)));
   // On the CPU imageToDevice is imageToTensor; on CUDA the round trip is exact.
   CHECK(torch::equal(imageToDevice(image, torch::kCPU).nan_to_num(0),
                      imageToTensor(image).nan_to_num(0)));

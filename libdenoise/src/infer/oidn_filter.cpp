@@ -145,7 +145,7 @@ torch::Tensor scalarOn(float value, torch::Device device) {
 }  // namespace
 
 torch::Tensor bufferOnDevice(const Image& image, torch::Device device) {
-  // The stored channels cross (half where the values are halves), one is broadcast there.
+  // The stored channels cross, one is broadcast there.
   const torch::Tensor stored = imageToDevice(image, device).squeeze(0);
   const torch::Tensor three = stored.narrow(0, 0, image.channels >= 3 ? 3 : 1);
   return three.expand({3, image.height, image.width});

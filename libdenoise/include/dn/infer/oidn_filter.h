@@ -36,7 +36,7 @@ torch::Tensor oidnInput(const FrameBuffers& frame, const OidnInputSet& set, floa
 // frame in the frame's units, taken instead of the frame's images.
 using DeviceBuffers = std::map<std::string, torch::Tensor>;
 // A buffer of the frame on `device` as DeviceBuffers holds it: its stored
-// channels cross, in half where every value is one (dn::imageToDevice), and a
+// channels cross as stored floats (dn::imageToDevice), and a
 // single channel is broadcast there.
 torch::Tensor bufferOnDevice(const Image& image, torch::Device device);
 // The same made on `device` with tensor operations from the buffers as

@@ -43,14 +43,8 @@ torch::Tensor imageRegionToTensor(const Image& image, int64_t y0, int64_t x0, in
 torch::Tensor imageToTensor(const Image& image);
 Image tensorToImage(const torch::Tensor& tensor);
 
-// The image as it crosses to a GPU: (H, W, C), in half where every value
-// round-trips through half (a render saved in half: half the bytes, the same
-// values; a NaN counts as one, the networks read it as 0), else in float.
-// In pinned memory when `pinned` (a CUDA LibTorch only), so that the copy
-// runs at the bus's speed and need not be waited for.
-torch::Tensor stageImage(const Image& image, bool pinned);
 // (1, C, H, W) float on `device`, the values of imageToTensor: on the CPU that
-// tensor; on CUDA staged (stageImage), copied without waiting and laid out there.
+// tensor; elsewhere the stored floats copied there and laid out there.
 torch::Tensor imageToDevice(const Image& image, torch::Device device);
 
 // normalizeAux of the frame's `buffers` over one rectangle: the same numbers as
