@@ -27,6 +27,7 @@
 #include "dn/io/sha256.h"
 #include "dn/nn/reusing_allocator.h"
 #include "dn/passes/joint_denoise.h"
+#include "dn/passes/sequence_passes.h"
 #include "dn/temporal/sequence.h"
 #include "dndenoise/inputs.h"
 #include "dndenoise/jobs.h"
@@ -78,6 +79,8 @@ int run(Options o, int argc, char** argv) {
   const OidnBase passBase = o.passes ? denoiser.oidnBase() : OidnBase(nullptr);
   if (o.passes) requirePrefilterNetworks(passBase, o.model);
   const auto sequence = planSequence(o, jobs);
+  // On a sequence the light passes are filtered with the beauty's weights.
+  const bool passesOverTime = sequence && o.passes && o.passesOverTime != PassesOverTime::Off;
   const temporal::Sequence::Read readFile = [&](const std::string& path) {
     return readInput(o, denoiser, path, path);
   };
@@ -111,13 +114,22 @@ int run(Options o, int argc, char** argv) {
     const auto alone = [&](const std::string&, const FrameBuffers& f) {
       return denoiser.denoise(f, options);
     };
+    const SequencePassOptions passOptions{passOptionsFor(options), o.passesOverTime};
     std::vector<double> times;
     DenoiseResult result;
+    std::map<std::string, Image> filteredPasses;
     for (int r = 0; r < o.repeats; ++r) {
       const auto t0 = Clock::now();
       try {
-        result = sequence ? sequence->denoise(input, frame, readFile, alone)
-                          : denoiser.denoise(frame, options);
+        if (passesOverTime) {
+          auto both = sequence->denoise(input, frame, readFile, alone,
+                                        lightPassCompanions(passBase, passOptions));
+          result = std::move(both.result);
+          filteredPasses = std::move(both.companions);
+        } else {
+          result = sequence ? sequence->denoise(input, frame, readFile, alone)
+                            : denoiser.denoise(frame, options);
+        }
       } catch (const std::invalid_argument& e) {
         throw IoError(fmt::format("{}: {}", name, e.what()));
       }
@@ -135,8 +147,10 @@ int run(Options o, int argc, char** argv) {
                  clamped);
     std::optional<PassesResult> passes;
     if (o.passes) {
-      passes = denoisePassesOfFile(passBase, input, frame, result.color, passOptionsFor(options));
-      if (o.verbose) reportPasses(name, *passes);
+      passes = passesOverTime
+                   ? passesOfSequenceFrame(input, frame, filteredPasses, result.color, passOptions)
+                   : denoisePassesOfFile(passBase, input, frame, result.color, passOptions.denoise);
+      if (o.verbose) reportPasses(name, *passes, passesOverTime, o.passesOverTime);
     }
     writeOutputs(o, {output, previews.empty() ? "" : previews[j], input, name}, frame, result,
                  passes, display);

@@ -9,6 +9,11 @@ filter see real buffers.
 
   temporal_speed.py --bin build/bin --shot /work/data/shots/room_dolly [--spp 4]
                     [--frames 6] [--tiles 15x11] [--rounds 1] [--threads 2] [--no-oidn]
+                    [--passes]
+
+--passes: the same with the light passes (dndenoise --passes, a multilayer
+result; the shot must have them): frame by frame, and on the sequence with the
+light passes filtered over time (--temporal filter and on).
 
 One process per setting, the settings interleaved round by round; prints wall
 and CPU seconds and peak RSS per run, and each setting's median wall time over
@@ -55,6 +60,7 @@ def main():
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-oidn", action="store_true", help="leave out OIDN's prefilter mode")
+    ap.add_argument("--passes", action="store_true", help="with --passes (no OIDN)")
     args = ap.parse_args()
     tiles = tuple(int(v) for v in args.tiles.split("x"))
     with tempfile.TemporaryDirectory() as tmp:
@@ -66,10 +72,11 @@ def main():
               f"{args.threads} threads, {os.cpu_count()} cores")
         dndenoise = os.path.join(args.bin, "dndenoise")
         pattern = os.path.join(tmp, f"spp{args.spp}.#.exr")
+        output = ["--passes"] if args.passes else ["--rgb-only"]
         runs = {f"--temporal {mode}": [dndenoise, pattern, "-o", os.path.join(tmp, f"{mode}.#.exr"),
-                                       "--rgb-only", "--temporal", mode, "--threads", str(args.threads)]
+                                       *output, "--temporal", mode, "--threads", str(args.threads)]
                 for mode in ("off", "filter", "on")}
-        if not args.no_oidn:
+        if not args.no_oidn and not args.passes:
             runs["OIDN prefilter"] = [sys.executable, os.path.join(HERE, "..", "experiments", "oidn_denoise.py"),
                                       *frames, "-o", os.path.join(tmp, "oidn") + "/", "--prefilter",
                                       "--threads", str(args.threads)]

@@ -27,6 +27,27 @@ Data (each set skipped when absent):
 
   python3 experiments/passes_eval.py [--bin build/bin] [--renders DIR] [--work DIR]
                                      [--variants SPP...] [--results docs/RESULTS.md]
+
+Sequences (--shots): the light passes of animations (issue 54). Each shot
+folder has experiments/render_sequences.py's layout: SHOT/spp<N>.<frame>.exr,
+and SHOT/ref.<frame>.exr for the frames scored (or one SHOT/ref.exr for a
+locked-off shot). Per shot and pass, over the frames with a reference:
+  fbf        dndenoise --passes --temporal off (every frame alone)
+  seq        dndenoise --passes (the default: the light passes filtered over time
+             with the beauty's weights, the residual closing the sum)
+  seq_all    --passes-temporal all (the colour passes filtered too)
+  seq_off    --passes-temporal off (every pass alone, the beauty temporal: the
+             residual takes the difference)
+  oidn_pre   OIDN 2.5.1's prefilter mode on each pass alone, per frame
+PSNR (Reinhard) against the reference's same pass, flicker of the error
+(mean over frames of mean |e_t - e_t-1|, e = R(denoised) - R(reference), R
+Reinhard's x / (1 + x)) and its ratio to fbf's, the passes' recombination
+error against each method's own denoised beauty, the regrade (glossy x 1.5,
+recombined) against the reference regraded the same way, and each dndenoise
+run's wall time (whole process).
+
+  python3 experiments/passes_eval.py --shots SHOT... [--spp 4] [--window 4]
+                                     [--threads N] [--work DIR]
 """
 
 import argparse
@@ -295,8 +316,128 @@ def table(rows, methods):
     return lines
 
 
+SEQUENCE_METHODS = {"fbf": ["--temporal", "off"], "seq": [], "seq_all": ["--passes-temporal", "all"],
+                    "seq_off": ["--passes-temporal", "off"]}
+
+
+def reinhard(image):
+    image = np.clip(image, 0, None)
+    return image / (1 + image)
+
+
+def shot_frames(shot, spp):
+    """(every frame number rendered at spp, {scored frame: its reference path})."""
+    frames = sorted(int(f.split(".")[-2]) for f in glob.glob(os.path.join(shot, f"spp{spp}.*.exr")))
+    shared = os.path.join(shot, "ref.exr")
+    refs = {n: shared if os.path.exists(shared) else os.path.join(shot, f"ref.{n:04d}.exr") for n in frames}
+    return frames, {n: r for n, r in refs.items() if os.path.exists(r)}
+
+
+def run_sequence(args, shot, spp, method, out_dir):
+    """dndenoise --passes over the shot's frames in one process; its wall time (None: reused)."""
+    os.makedirs(out_dir, exist_ok=True)
+    frames, _ = shot_frames(shot, spp)
+    if all(os.path.exists(os.path.join(out_dir, f"out.{n:04d}.exr")) for n in frames):
+        return None
+    cmd = [os.path.join(args.bin, "dndenoise"), "--passes", os.path.join(shot, f"spp{spp}.#.exr"),
+           "-o", os.path.join(out_dir, "out.#.exr"), "--window", str(args.window),
+           "--frames", f"{frames[0]}-{frames[-1]}"] + SEQUENCE_METHODS[method]
+    if args.threads:
+        cmd += ["--threads", str(args.threads)]
+    start = time.time()
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"passes_eval: {' '.join(cmd)} failed: {done.stderr.strip()}")
+    return time.time() - start
+
+
+def sequence_frame(args, shot, spp, method, n, oidn):
+    """(passes by key with the residual, the method's denoised beauty) of frame n."""
+    path = os.path.join(shot, f"spp{spp}.{n:04d}.exr")
+    if method != "oidn_pre":
+        return run_ours(args, path, os.path.join(args.work, os.path.basename(shot), method, f"out.{n:04d}.exr"))
+    _, beauty, albedo, normal, found, _ = load(path)
+    residual = beauty - recombine(usable_terms(found), found)
+    return oidn_passes(oidn, found, residual, beauty, albedo, normal, True)
+
+
+def sequence_scores(frames_out, frames_ref, terms):
+    """Per pass key (and "regrade"): PSNR per frame, flicker of the error; the recombination error."""
+    keys = [k for k in frames_ref[0][0] if k in frames_out[0][0]]
+    scores = {}
+    for key in keys + ["regrade"]:
+        outs, refs = [], []
+        for (passes, _), (ref_passes, _) in zip(frames_out, frames_ref):
+            if key == "regrade":
+                outs.append(recombine(terms, regraded(passes), passes["residual"]))
+                refs.append(recombine(terms, regraded(ref_passes), ref_passes["residual"]))
+            else:
+                outs.append(passes[key])
+                refs.append(ref_passes[key])
+        errors = [reinhard(o) - reinhard(r) for o, r in zip(outs, refs)]
+        flick = np.mean([np.abs(b - a).mean() for a, b in zip(errors, errors[1:])]) if len(errors) > 1 else np.nan
+        scores[key] = {"psnr": [psnr(r, o) for o, r in zip(outs, refs)], "flicker": float(flick)}
+    scores["recombination"] = max(rel_l1(recombine(terms, p, p["residual"]), b) for p, b in frames_out)
+    return scores
+
+
+def evaluate_shots(args):
+    oidn = Oidn("default", args.threads)
+    results = {}
+    for shot in args.shots:
+        name = os.path.basename(os.path.normpath(shot))
+        frames, refs = shot_frames(shot, args.spp)
+        if not refs:
+            sys.exit(f"passes_eval: {shot}: no ref.exr or ref.<frame>.exr for the frames of spp{args.spp}")
+        scored = sorted(refs)
+        frames_ref = []
+        for n in scored:
+            _, beauty, _, _, found, _ = load(refs[n])
+            found["residual"] = beauty - recombine(usable_terms(found), found)
+            frames_ref.append((found, beauty))
+        terms = usable_terms(frames_ref[0][0])
+        results[name] = {}
+        for method in list(SEQUENCE_METHODS) + ["oidn_pre"]:
+            seconds = None
+            if method in SEQUENCE_METHODS:
+                seconds = run_sequence(args, shot, args.spp, method, os.path.join(args.work, name, method))
+            outs = [sequence_frame(args, shot, args.spp, method, n, oidn) for n in scored]
+            results[name][method] = sequence_scores(outs, frames_ref, terms)
+            results[name][method]["seconds"] = seconds
+            print(f"  {name} {method} done", flush=True)
+    with open(os.path.join(args.work, "sequence_results.json"), "w") as f:
+        json.dump(results, f, indent=1)
+    return results
+
+
+def sequence_table(results):
+    lines = []
+    for name, methods in results.items():
+        keys = [k for k in methods["fbf"] if isinstance(methods["fbf"][k], dict)]
+        lines += [f"### {name}", "",
+                  "| pass | " + " | ".join(f"PSNR {m}" for m in methods) + " | " +
+                  " | ".join(f"flicker {m}/fbf" for m in methods if m != "fbf") + " |",
+                  "|---" * (2 * len(methods)) + "|"]
+        for key in keys:
+            base = methods["fbf"][key]["flicker"]
+            psnrs = " | ".join(f"{np.mean(methods[m][key]['psnr']):.2f}" for m in methods)
+            ratios = " | ".join(f"{methods[m][key]['flicker'] / base:.2f}" if base > 0 else "-"
+                                for m in methods if m != "fbf")
+            lines.append(f"| {key} | {psnrs} | {ratios} |")
+        lines += ["", "recombination (mean |sum - beauty| / mean |beauty|, worst frame): " +
+                  ", ".join(f"{m} {methods[m]['recombination']:.1e}" for m in methods),
+                  "dndenoise wall time, whole process: " +
+                  ", ".join(f"{m} {methods[m]['seconds']:.1f} s" for m in methods
+                            if methods[m].get("seconds")), ""]
+    return lines
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--shots", nargs="+", help="sequence folders: the per-pass sequence mode")
+    ap.add_argument("--spp", type=int, default=4, help="--shots: the sample count scored")
+    ap.add_argument("--window", type=int, default=4, help="--shots: dndenoise --window")
+    ap.add_argument("--threads", type=int, default=0, help="--shots: dndenoise and OIDN threads (0: all)")
     ap.add_argument("--bin", default=os.path.join(ROOT, "build/bin"))
     ap.add_argument("--renders", default="/work/data/passes/renders")
     ap.add_argument("--work", default="/work/data/passes/eval")
@@ -305,6 +446,10 @@ def main():
     ap.add_argument("--results", help="write the tables into this file's passes_eval section")
     ap.add_argument("--table-only", action="store_true", help="the tables from WORK/rows.json of a run")
     args = ap.parse_args()
+    if args.shots:
+        os.makedirs(args.work, exist_ok=True)
+        print("\n".join(sequence_table(evaluate_shots(args))))
+        return
     rows_path = os.path.join(args.work, "rows.json")
     if args.table_only:
         rows = json.load(open(rows_path))

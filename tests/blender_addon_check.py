@@ -78,6 +78,23 @@ def check_runner(dndenoise, source, work):
           all(n.startswith("den.") and n.endswith(".exr") for n in left), (job.error(), left))
 
 
+def passes_sum_error(path):
+    """Largest relative difference of Cycles' rule over the Denoised passes from the Denoised beauty."""
+    with OpenEXR.File(path, separate_channels=True) as f:
+        ch = {n: c.pixels.astype(np.float64) for p in f.parts for n, c in p.channels.items()}
+
+    def D(name):
+        key = f"ViewLayer.Denoised {name}".rstrip()
+        return np.dstack([ch[f"{key}.{c}"] for c in "RGB"]) if f"{key}.R" in ch else 0.0
+    total = D("Residual")
+    for kind in ("Diffuse", "Glossy", "Transmission"):
+        total = total + (D(kind + " Direct") + D(kind + " Indirect")) * D(kind + " Color")
+    for name in ("Volume Direct", "Volume Indirect", "Emission", "Environment"):
+        total = total + D(name)
+    beauty = D("")
+    return float((np.abs(total - beauty) / np.maximum(np.abs(beauty), 1e-3)).max())
+
+
 def main():
     ap = argparse.ArgumentParser()
     for a in ("--venv", "--dndenoise", "--source", "--work-dir"):
@@ -183,6 +200,9 @@ def main():
           seen["passes_denoise"] == [["FINISHED"], ""] and
           {"ViewLayer.Denoised Diffuse Direct", "ViewLayer.Denoised Glossy Color", "ViewLayer.Diffuse Direct"}
           <= layers, (seen["passes_denoise"], sorted(layers)))
+    rel = passes_sum_error(passes_den)
+    check(f"Light Passes with Temporal: the denoised passes add up to the denoised beauty ({rel:.1e})",
+          rel < 1e-5, rel)
     return summary()
 
 

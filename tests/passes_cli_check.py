@@ -4,7 +4,10 @@ passes are written beside the noisy ones (Blender 5: one part per pass, named
 as Blender names its parts; Blender 3.4: in the single part), they recombine
 by Cycles' rule to the denoised beauty in the file within 1e-4 relative, the
 beauty is the one written without the flag, -v names the passes and the
-rule, and a file without light passes fails with one line and no output.
+rule, and a file without light passes fails with one line and no output. On
+a locked-off sequence (testdata/still_passes) each light pass is filtered
+over time: a third of the flicker frame by frame at most, the residual no
+more, the sum exact, split runs the same bits.
 Read back with the OpenEXR Python bindings, independently of the tool."""
 import argparse
 import os
@@ -52,6 +55,68 @@ def recombined(parts, terms):
 
 def max_relative(a, b, floor=1e-3):
     return float((np.abs(a - b) / np.maximum(np.abs(b), floor)).max())
+
+
+LIGHTS_5 = [n for lights, _ in TERMS_5 for n in lights]
+COLORS_5 = [c for _, c in TERMS_5]
+STILL_FRAMES = range(1, 7)
+
+
+def flicker(frames):
+    """Mean over frames of the mean |change| from the frame before."""
+    return float(np.mean([np.abs(b - a).mean() for a, b in zip(frames, frames[1:])]))
+
+
+def denoised_sequence(folder, name):
+    """{pass or "Denoised": [per frame, the denoised layer]} of folder/name.####.exr."""
+    out = {}
+    for n in STILL_FRAMES:
+        parts = read(os.path.join(folder, f"{name}.{n:04d}.exr"))
+        for key in LIGHTS_5 + COLORS_5 + ["Residual"]:
+            out.setdefault(key, []).append(layer(parts, f"ViewLayer.Denoised {key}")[0])
+        out.setdefault("Denoised", []).append(layer(parts, "ViewLayer.Denoised")[0])
+        out.setdefault("recombined", []).append(recombined(parts, TERMS_5))
+    return out
+
+
+def check_sequence(dndenoise, data, w):
+    """A locked-off sequence (testdata/still_passes): every change is leftover error."""
+    shot = os.path.join(data, "still_passes", "spp4.#.exr")
+    base = [dndenoise, "--passes", shot, "--threads", "2"]
+    out = run(base + ["-o", os.path.join(w, "seq.#.exr"), "-v"])
+    check("sequence --passes: exit 0", out.returncode == 0, out.stderr)
+    check("-v says the light passes are filtered with the beauty's weights",
+          "light passes filtered over time with the beauty's weights" in out.stderr, out.stderr)
+    out = run(base + ["-o", os.path.join(w, "fbf.#.exr"), "--temporal", "off"])
+    check("sequence --passes --temporal off: exit 0", out.returncode == 0, out.stderr)
+    out = run(base + ["-o", os.path.join(w, "off.#.exr"), "--passes-temporal", "off"])
+    check("sequence --passes-temporal off: exit 0", out.returncode == 0, out.stderr)
+    for frames in ("1-3", "4-6"):
+        run(base + ["-o", os.path.join(w, "split.#.exr"), "--frames", frames])
+    seq, fbf = denoised_sequence(w, "seq"), denoised_sequence(w, "fbf")
+    off, split = denoised_sequence(w, "off"), denoised_sequence(w, "split")
+
+    rel = max(max_relative(a, b) for a, b in zip(seq["recombined"], seq["Denoised"]))
+    check(f"sequence: the passes recombine to the denoised beauty ({rel:.2e} relative)", rel < 1e-5, rel)
+    check("sequence: frames 1-3 and 4-6 in two runs write the same bits as one run",
+          all(np.array_equal(a, b) for key in seq for a, b in zip(seq[key], split[key])))
+    for key in LIGHTS_5:
+        alone = flicker(fbf[key])
+        if alone == 0.0:  # a pass without light in this room
+            continue
+        ratio = flicker(seq[key]) / alone
+        check(f"still shot: Denoised {key} flickers {ratio:.2f} of frame by frame (at most 1/3)",
+              ratio <= 1 / 3, ratio)
+    ratio = flicker(seq["Residual"]) / flicker(fbf["Residual"])
+    check(f"still shot: the residual flickers {ratio:.2f} of frame by frame (at most 1)", ratio <= 1.0, ratio)
+    check("the colour passes are as denoised alone (filtered only with --passes-temporal all)",
+          all(np.array_equal(a, b) for key in COLORS_5 for a, b in zip(seq[key], fbf[key])))
+    check("--passes-temporal off: every pass as denoised frame by frame, the residual closing the sum",
+          all(np.array_equal(a, b) for key in LIGHTS_5 + COLORS_5 for a, b in zip(off[key], fbf[key]))
+          and max(max_relative(a, b) for a, b in zip(off["recombined"], off["Denoised"])) < 1e-5)
+    expect_error("--passes-temporal without --passes",
+                 [dndenoise, shot, "--passes-temporal", "all", "-o", os.path.join(w, "bad.#.exr")],
+                 "--passes-temporal", no_file=os.path.join(w, "bad.0001.exr"))
 
 
 def main():
@@ -105,6 +170,8 @@ def main():
           and "ViewLayer.Denoised VolumeInd.B" in got34[0][1], [n for n, _ in got34])
     rel = max_relative(recombined(got34, TERMS_34), layer(got34, "ViewLayer.Denoised")[0])
     check(f"Blender 3.4: the passes recombine to the denoised beauty ({rel:.2e} relative)", rel < 1e-4, rel)
+
+    check_sequence(dndenoise, data, w)
 
     # Bad input: one line, exit 1, no output.
     mitsuba = os.path.join(data, "renderers", "mitsuba_box_matpreview_4spp.exr")

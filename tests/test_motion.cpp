@@ -673,3 +673,74 @@ TEST_CASE("temporal filter: a neighbour that cannot be brought in throws, thread
   CHECK_THROWS_AS(temporal::filterFrame(window, 1), std::invalid_argument);
   CHECK_THROWS_AS(temporal::filterFrame(window, 1, two), std::invalid_argument);
 }
+
+namespace {
+
+// Per frame, `image` of it, for filterWith.
+std::vector<const Image*> imagesOf(const std::vector<temporal::WindowFrame>& frames,
+                                   Image temporal::WindowFrame::*image) {
+  std::vector<const Image*> images;
+  for (const auto& f : frames) images.push_back(&(f.*image));
+  return images;
+}
+
+// Mean over frames of the mean absolute change from the frame before.
+double flicker(const std::vector<Image>& frames) {
+  double sum = 0.0;
+  for (std::size_t t = 1; t < frames.size(); ++t) {
+    double d = 0.0;
+    for (std::size_t i = 0; i < frames[t].pixels.size(); ++i)
+      d += std::abs(frames[t].pixels[i] - frames[t - 1].pixels[i]);
+    sum += d / frames[t].pixels.size();
+  }
+  return sum / (frames.size() - 1);
+}
+
+}  // namespace
+
+TEST_CASE(
+    "temporal filter: its weights filter another image of the frames as they did the results") {
+  // A pan (resampled taps, the screen's edge), a still shot, and neighbours relit first.
+  std::vector<temporal::WindowFrame> pan;
+  for (int t = 0; t < 3; ++t) {
+    pan.push_back(stillFrame(makeFrame(32, 24, t, 0), 40 + t, 50 + t));
+    pan.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+  }
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> relit = stillShot(truth, 3, 500, 600);
+  for (unsigned t : {0u, 2u}) {
+    for (float& v : relit[t].denoised.pixels) v *= 1.2f;
+    for (float& v : relit[t].noisy.pixels) v *= 1.2f;
+  }
+  for (const auto* frames : {&pan, &relit}) {
+    const temporal::TemporalResult r = temporal::filterFrame(windowOf(*frames), 1);
+    REQUIRE(r.weights.neighbours.size() == 2);
+    const std::vector<const Image*> results = imagesOf(*frames, &temporal::WindowFrame::denoised);
+    CHECK(temporal::filterWith(r.weights, results).pixels == r.color.pixels);
+    // A neighbour without the image is left out; alone, the frame's own is kept.
+    CHECK(temporal::filterWith(r.weights, {nullptr, results[1], nullptr}).pixels ==
+          results[1]->pixels);
+    CHECK_THROWS_AS(temporal::filterWith(r.weights, {results[0], nullptr}), std::invalid_argument);
+  }
+  CHECK(temporal::filterFrame(windowOf(relit), 1).weights.neighbours[0].relit);
+}
+
+TEST_CASE("temporal filter: a light pass filtered with the results' weights flickers far less") {
+  // A still shot; each frame's pass (half the light) carries a leftover error
+  // of its own, as a pass denoised alone does.
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 9, 300, 400);
+  std::vector<Image> passes;
+  for (unsigned t = 0; t < frames.size(); ++t) {
+    Image pass = stillFrame(truth, 0, 450 + t).denoised;
+    for (float& v : pass.pixels) v *= 0.5f;
+    passes.push_back(std::move(pass));
+  }
+  std::vector<const Image*> images;
+  for (const Image& pass : passes) images.push_back(&pass);
+  std::vector<Image> filtered;
+  for (std::size_t t = 0; t < frames.size(); ++t)
+    filtered.push_back(
+        temporal::filterWith(temporal::filterFrame(windowOf(frames), t).weights, images));
+  CHECK(flicker(filtered) < flicker(passes) / 3);
+}

@@ -106,6 +106,11 @@ output:
                       renderer's rule to the denoised beauty; passes the file
                       lacks are covered by a "Denoised Residual" layer. Result
                       layers are then float (docs/dndenoise.md#light-passes)
+  --passes-temporal light|all|off
+                      on a sequence with motion vectors: the light passes
+                      filtered over time with the beauty's weights, the
+                      residual closing the sum (light, default); the colour
+                      passes too (all); every pass as denoised alone (off)
 display (PNG/JPEG/TIFF outputs and --preview):
   --ocio CONFIG       OpenColorIO config file (default: $OCIO, else the built-in
                       sRGB config: clamp to [0, 1] and the sRGB curve)
@@ -306,6 +311,14 @@ Options parseArgs(int argc, char** argv) {
     } else if (args.flag("--passes")) {
       o.passes = true;
       o.given.push_back({"--passes", OptionScope::OidnBase});
+    } else if (args.flag("--passes-temporal")) {
+      const std::string v = args.value("--passes-temporal");
+      if (v != "light" && v != "all" && v != "off")
+        throw cli::UsageError("--passes-temporal must be light, all or off, got " + v);
+      o.passesOverTime = v == "light" ? PassesOverTime::Light
+                         : v == "all" ? PassesOverTime::All
+                                      : PassesOverTime::Off;
+      o.passesTemporalGiven = true;
     } else if (args.flag("--preview")) {
       o.preview = args.value("--preview");
     } else if (args.flag("--ocio")) {
@@ -372,6 +385,7 @@ Options parseArgs(int argc, char** argv) {
   if (o.maxError >= 0 && o.reference.empty()) throw cli::UsageError("--maxerror needs --ref REF");
   if (!o.reference.empty() && o.maxError < 0) throw cli::UsageError("--ref needs --maxerror");
   checkOptionPairs(o);
+  if (o.passesTemporalGiven && !o.passes) throw cli::UsageError("--passes-temporal needs --passes");
   if (o.passes && (o.rgbOnly || !o.separateFiles.empty()))
     throw cli::UsageError(
         "--passes needs a multilayer EXR input and output, not --rgb-only or "

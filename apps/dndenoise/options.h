@@ -9,6 +9,7 @@
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
 #include "dn/ocio_preview.h"
+#include "dn/passes/sequence_passes.h"
 #include "dn/temporal/sequence.h"
 
 namespace dn::dndenoise {
@@ -41,7 +42,9 @@ struct Options {
   std::string preview;
   tonemap::PreviewOptions display;
   bool listViews = false;
-  bool passes = false;                      // --passes
+  bool passes = false;                                    // --passes
+  PassesOverTime passesOverTime = PassesOverTime::Light;  // --passes-temporal
+  bool passesTemporalGiven = false;
   std::vector<GivenOption> given;           // options that act on some models only
   bool temporal = true;                     // --temporal on|filter; off: false
   dn::temporal::SequenceSettings sequence;  // --window, --motion, --temporal filter

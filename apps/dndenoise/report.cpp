@@ -87,7 +87,8 @@ void reportResult(const Options& o, const Denoiser& denoiser, const std::string&
   }
 }
 
-void reportPasses(const std::string& name, const PassesResult& passes) {
+void reportPasses(const std::string& name, const PassesResult& passes, bool overTime,
+                  PassesOverTime which) {
   std::string found;
   for (const auto& key : passes.layout.usedKeys())
     found += (found.empty() ? "" : ", ") + passes.layout.layerName(key);
@@ -98,6 +99,9 @@ void reportPasses(const std::string& name, const PassesResult& passes) {
   fmt::print(stderr,
              "dndenoise: {}: denoised passes recombine to the beauty within {:.2g} relative\n",
              name, passes.denoised.maxRelativeError);
+  if (overTime)
+    fmt::print(stderr, "dndenoise: {}: {} filtered over time with the beauty's weights\n", name,
+               which == PassesOverTime::All ? "light and colour passes" : "light passes");
 }
 
 void checkAgainstReference(const Options& o, const Image& ref, const Image& result, int& status) {

@@ -23,7 +23,9 @@ void reportResult(const Options& o, const Denoiser& denoiser, const std::string&
                   std::vector<double> times);
 
 // -v: the light passes found, the rule and how closely the denoised ones recombine.
-void reportPasses(const std::string& name, const PassesResult& passes);
+// `overTime`: a sequence's passes, filtered over time as `which` says.
+void reportPasses(const std::string& name, const PassesResult& passes, bool overTime,
+                  PassesOverTime which);
 
 // --ref/--maxerror: one line; `status` becomes kExitThreshold when it fails.
 void checkAgainstReference(const Options& o, const Image& ref, const Image& result, int& status);

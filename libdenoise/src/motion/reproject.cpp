@@ -89,23 +89,34 @@ std::array<double, 4> catmullRom(double t) {
           0.5 * (t3 - t2)};
 }
 
-// The source resampled at (qx, qy) by Catmull-Rom into `out`, where all 16
-// taps lie on the screen and show the destination's surface by depth and
-// normal (a texture's edges within one surface are what it keeps sharp);
-// false, with `out` untouched, where not, or where a value would be negative.
-bool cubicSample(const Image& source, const Guides& sourceGuides, float qx, float qy,
-                 const Guides& currentGuides, std::size_t here, const TrustOptions& options,
-                 float* out) {
-  const int width = source.width, height = source.height, channels = source.channels;
+// Whether Catmull-Rom may resample at (qx, qy): all 16 taps lie on the
+// screen and show the destination's surface by depth and normal (a texture's
+// edges within one surface are what it keeps sharp).
+bool cubicTapsMatch(const Guides& sourceGuides, float qx, float qy, const Guides& currentGuides,
+                    std::size_t here, int width, int height, const TrustOptions& options) {
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
-  if (channels > 8 || x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
-  const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
-  std::array<double, 8> sum = {};
+  if (x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
   for (int j = 0; j < 4; ++j)
     for (int i = 0; i < 4; ++i) {
       const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
       if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options, false))
         return false;
+    }
+  return true;
+}
+
+// The source resampled at (qx, qy) by Catmull-Rom into `out`, whose taps
+// cubicTapsMatch allowed; false, with `out` untouched, where a value would be
+// negative (an overshoot at a dark edge).
+bool cubicSample(const Image& source, float qx, float qy, float* out) {
+  const int width = source.width, channels = source.channels;
+  const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
+  if (channels > 8) return false;
+  const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
+  std::array<double, 8> sum = {};
+  for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i) {
+      const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
       for (int c = 0; c < channels; ++c)
         sum[c] += wx[i] * wy[j] * source.pixels[tap * channels + c];
     }
@@ -113,6 +124,25 @@ bool cubicSample(const Image& source, const Guides& sourceGuides, float qx, floa
     if (sum[c] < 0.0) return false;
   for (int c = 0; c < channels; ++c) out[c] = static_cast<float>(sum[c]);
   return true;
+}
+
+// The bits of Resampling::taps beyond the four bilinear taps'.
+constexpr unsigned char kCubicTaps = 1u << 4;
+constexpr unsigned char kBroughtIn = 1u << 5;
+
+// Bilinear tap t (0-3) of the pixel at (qx, qy): its index and weight; the
+// weight is 0 where the tap is off the image.
+struct Tap {
+  std::size_t index;
+  double weight;
+};
+Tap bilinearTap(float qx, float qy, int t, int width, int height) {
+  const int x0 = static_cast<int>(std::floor(qx)), y0 = static_cast<int>(std::floor(qy));
+  const float fx = qx - x0, fy = qy - y0;
+  const int tx = x0 + (t & 1), ty = y0 + (t >> 1);
+  const double w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
+  if (w <= 0.0 || tx < 0 || ty < 0 || tx >= width || ty >= height) return {0, 0.0};
+  return {static_cast<std::size_t>(ty) * width + tx, w};
 }
 
 void checkGuides(const Guides& g, int width, int height) {
@@ -161,46 +191,79 @@ Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
   return positions;
 }
 
-Reprojected reproject(const Image& source, const Guides& sourceGuides, const Image& positions,
-                      const Guides& currentGuides, const TrustOptions& options) {
-  const int width = positions.width, height = positions.height, channels = source.channels;
-  if (source.width != width || source.height != height || positions.channels != 2)
-    throw std::invalid_argument("reproject: source and positions differ in size");
+Resampling planResampling(const Guides& sourceGuides, const Image& positions,
+                          const Guides& currentGuides, const TrustOptions& options) {
+  const int width = positions.width, height = positions.height;
+  if (positions.channels != 2) throw std::invalid_argument("reproject: positions need 2 channels");
   checkGuides(sourceGuides, width, height);
   checkGuides(currentGuides, width, height);
-  Reprojected out{Image(width, height, channels), Image(width, height, 1)};
-  std::vector<double> sum(channels);
+  Resampling plan{positions, std::vector<unsigned char>(positions.pixelCount(), 0),
+                  Image(width, height, 1)};
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
       const std::size_t here = static_cast<std::size_t>(y) * width + x;
       const float qx = positions.at(x, y, 0), qy = positions.at(x, y, 1);
       if (std::isnan(qx) || std::isnan(qy) || showsEnvironment(currentGuides, here)) continue;
-      const int x0 = static_cast<int>(std::floor(qx)), y0 = static_cast<int>(std::floor(qy));
-      const float fx = qx - x0, fy = qy - y0;
       double accepted = 0.0;
-      std::fill(sum.begin(), sum.end(), 0.0);
+      unsigned char taps = 0;
       for (int t = 0; t < 4; ++t) {
-        const int tx = x0 + (t & 1), ty = y0 + (t >> 1);
-        const double w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-        if (w <= 0.0 || tx < 0 || ty < 0 || tx >= width || ty >= height) continue;
-        const std::size_t tap = static_cast<std::size_t>(ty) * width + tx;
-        if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options)) continue;
-        accepted += w;
-        for (int c = 0; c < channels; ++c) sum[c] += w * source.pixels[tap * channels + c];
+        const Tap tap = bilinearTap(qx, qy, t, width, height);
+        if (tap.weight <= 0.0 ||
+            !sameSurface(sourceGuides, tap.index, currentGuides, here, width, height, options))
+          continue;
+        accepted += tap.weight;
+        taps |= static_cast<unsigned char>(1u << t);
       }
       if (accepted < options.minCoverage) continue;
-      float* value = &out.image.pixels[here * channels];
+      taps |= kBroughtIn;
       // Where every bilinear tap matched, the sharper cubic where it can (at a
       // whole-pixel offset both are the tap itself).
+      const float fx = qx - static_cast<int>(std::floor(qx));
+      const float fy = qy - static_cast<int>(std::floor(qy));
       const bool whole = (fx == 0.0f || fx == 1.0f) && (fy == 0.0f || fy == 1.0f);
-      const bool cubic =
-          options.cubic && !whole && accepted > 0.999 &&
-          cubicSample(source, sourceGuides, qx, qy, currentGuides, here, options, value);
-      if (!cubic)
-        for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
-      out.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));
+      if (options.cubic && !whole && accepted > 0.999 &&
+          cubicTapsMatch(sourceGuides, qx, qy, currentGuides, here, width, height, options))
+        taps |= kCubicTaps;
+      plan.taps[here] = taps;
+      plan.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));
     }
+  return plan;
+}
+
+Image resample(const Resampling& plan, const Image& source) {
+  const int width = plan.positions.width, height = plan.positions.height;
+  const int channels = source.channels;
+  if (source.width != width || source.height != height)
+    throw std::invalid_argument("reproject: source and positions differ in size");
+  Image out(width, height, channels);
+  std::vector<double> sum(channels);
+  for (std::size_t here = 0; here < plan.taps.size(); ++here) {
+    const unsigned char taps = plan.taps[here];
+    if (!(taps & kBroughtIn)) continue;
+    const float qx = plan.positions.pixels[2 * here], qy = plan.positions.pixels[2 * here + 1];
+    double accepted = 0.0;
+    std::fill(sum.begin(), sum.end(), 0.0);
+    for (int t = 0; t < 4; ++t) {
+      if (!(taps & (1u << t))) continue;
+      const Tap tap = bilinearTap(qx, qy, t, width, height);
+      accepted += tap.weight;
+      for (int c = 0; c < channels; ++c)
+        sum[c] += tap.weight * source.pixels[tap.index * channels + c];
+    }
+    float* value = &out.pixels[here * channels];
+    if (!((taps & kCubicTaps) && cubicSample(source, qx, qy, value)))
+      for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
+  }
   return out;
+}
+
+Reprojected reproject(const Image& source, const Guides& sourceGuides, const Image& positions,
+                      const Guides& currentGuides, const TrustOptions& options) {
+  if (source.width != positions.width || source.height != positions.height ||
+      positions.channels != 2)
+    throw std::invalid_argument("reproject: source and positions differ in size");
+  Resampling plan = planResampling(sourceGuides, positions, currentGuides, options);
+  return {resample(plan, source), std::move(plan.trust)};
 }
 
 bool showsEnvironment(const Guides& guides, std::size_t pixel) {

@@ -180,7 +180,7 @@ void shareDifference(const std::vector<Part>& parts, const Image& difference,
 // holds to one rounding whatever the sharing did.
 void closeResidual(const LightPassLayout& layout, LightPassImages& passes, const Image& beauty) {
   Image& residual = passes[kResidualPass];
-  std::fill(residual.pixels.begin(), residual.pixels.end(), 0.0f);
+  residual = Image(beauty.width, beauty.height, beauty.channels);  // 0: out of the sum
   const Image explained = recombine(layout, passes);
   for (std::size_t i = 0; i < residual.pixels.size(); ++i)
     residual.pixels[i] = beauty.pixels[i] - explained.pixels[i];
@@ -211,7 +211,8 @@ LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& fra
     for (const auto& light : term.lights)
       denoised[light] = denoiseLight(base, noisy.at(light), *guide, normal, run);
   }
-  denoised[kResidualPass] = denoiseSigned(base, noisy.at(kResidualPass), albedo, normal, run);
+  if (options.residualAlone)
+    denoised[kResidualPass] = denoiseSigned(base, noisy.at(kResidualPass), albedo, normal, run);
   return denoised;
 }
 
@@ -267,6 +268,7 @@ PassDenoiseOptions passOptionsFor(const DenoiseOptions& denoise) {
   options.run.device = denoise.device;
   options.run.tile = denoise.tile;
   options.run.maxMemoryBytes = denoise.maxMemoryBytes;
+  options.residualAlone = false;  // ShareRule::None: the sum closes it
   return options;
 }
 
@@ -289,16 +291,21 @@ OidnBase oidnBaseOfModel(const std::string& modelPath) {
   return base;
 }
 
-PassesResult denoisePassesOfFile(const OidnBase& base, const std::string& path,
-                                 const FrameBuffers& frame, const Image& denoisedBeauty,
-                                 const PassDenoiseOptions& options) {
-  PassesResult result;
-  result.layout = findLightPasses(channelNames(path), layerPrefixOf(frame));
-  if (result.layout.empty()) throw IoError(path + kNoPasses);
+LightPassLayout passLayoutOfFrame(const std::string& path, const FrameBuffers& frame) {
+  LightPassLayout layout = findLightPasses(channelNames(path), layerPrefixOf(frame));
+  if (layout.empty()) throw IoError(path + kNoPasses);
   if (!frame.has("albedo") || !frame.has("normal"))
     throw IoError(path +
                   ": denoising light passes needs the albedo and normal (Cycles: "
                   "Denoising Data)");
+  return layout;
+}
+
+PassesResult denoisePassesOfFile(const OidnBase& base, const std::string& path,
+                                 const FrameBuffers& frame, const Image& denoisedBeauty,
+                                 const PassDenoiseOptions& options) {
+  PassesResult result;
+  result.layout = passLayoutOfFrame(path, frame);
   const LightPassImages noisy = readLightPasses(path, result.layout, frame);
   result.denoised = denoiseLightPasses(base, frame, result.layout, noisy, denoisedBeauty, options);
   result.layers = denoisedPassLayers(result.layout, result.denoised.passes);

@@ -20,6 +20,7 @@ struct Sequence::Input {
   WindowFrame frame;     // noisy, guides, motion; denoised
   Image cleanAlbedo;     // the prefilter's, for denoising the frame's history
   Image cleanNormal;
+  std::optional<Companions> companions;  // once made
 };
 
 namespace {
@@ -183,8 +184,52 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
   }
 }
 
+const Companions& Sequence::companionsOf(int number, const FrameBuffers* given, const Read& read,
+                                         const MakeCompanions& make) {
+  Input& entry = *inputs_.at(number);
+  if (!entry.companions) {
+    const std::string path = fileOf(number);
+    entry.companions = make(path, given ? *given : read(path));
+  }
+  return *entry.companions;
+}
+
+std::map<std::string, Image> Sequence::filteredCompanions(int number, const FrameBuffers& frame,
+                                                          const FilterWeights& weights,
+                                                          const Read& read,
+                                                          const MakeCompanions& make) {
+  // Window index k is frame number - radius + k; only the frames the colour
+  // took something from are needed.
+  const int first = number - static_cast<int>(weights.centre);
+  std::map<std::size_t, const Companions*> made;
+  made[weights.centre] = &companionsOf(number, &frame, read, make);
+  for (const NeighbourWeights& nb : weights.neighbours)
+    made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), nullptr, read, make);
+  std::map<std::string, Image> out;
+  for (const auto& [name, own] : *made.at(weights.centre)) {
+    if (!own.overTime) {
+      out[name] = own.image;
+      continue;
+    }
+    std::vector<const Image*> images(weights.centre + 1, nullptr);
+    for (const auto& [index, companions] : made) {
+      if (index >= images.size()) images.resize(index + 1, nullptr);
+      auto it = companions->find(name);
+      if (it != companions->end()) images[index] = &it->second.image;
+    }
+    out[name] = filterWith(weights, images);
+  }
+  return out;
+}
+
 DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
                                 const Read& read, const Denoise& denoise) {
+  return this->denoise(file, frame, read, denoise, nullptr).result;
+}
+
+Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameBuffers& frame,
+                                           const Read& read, const Denoise& denoise,
+                                           const MakeCompanions& make) {
   const int n = numbers_.at(file);
   forget(n);
   lastNumber_ = n;
@@ -194,14 +239,16 @@ DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& fra
   if (share > 0.0) makePastHistories(n, read, denoise);
   Filtered self = filtered(n, &frame, read, denoise);
   lastStats_ = self.result.stats;
-  DenoiseResult result = *self.alone;
+  WithCompanions out{*self.alone, {}};
+  DenoiseResult& result = out.result;
   result.color = std::move(self.result.color);
   if (share > 0.0) {
     const Image own = denoisedHistory(n, frame, self.result, denoise);
     result.color =
         blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
   }
-  return result;
+  if (make) out.companions = filteredCompanions(n, frame, self.result.weights, read, make);
+  return out;
 }
 
 DenoiseResult Sequence::denoise(const std::string& file, const Denoiser& denoiser,

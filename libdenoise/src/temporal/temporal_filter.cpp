@@ -277,8 +277,9 @@ struct Contribution {
   Image image;
   Image history;        // a past neighbour's denoised history, brought in as `image`
   Image historyWeight;  // its weight per pixel relative to `image`'s: stillness
-  Image positions;      // where each pixel of the frame is in the neighbour
-  Image relight;        // relit: the factor its result was brought to the frame's light by
+  // Where each pixel of the frame is in the neighbour, and the taps its images are brought in by.
+  motion::Resampling resampling;
+  Image relight;  // relit: the factor its result was brought to the frame's light by
   std::vector<double> weight;
   double spread = 0.0;  // of its differences from the frame's result, in local noise levels
 };
@@ -303,33 +304,35 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   if (!forward && !neighbour.history.empty()) still = stillness(positions, options.historyMotion);
   const bool withHistory =
       std::any_of(still.pixels.begin(), still.pixels.end(), [](float w) { return w > 0.0f; });
-  motion::Reprojected moved = motion::reproject(
-      withHistory ? stacked(neighbour.denoised, neighbour.history) : neighbour.denoised,
-      neighbour.guides, positions, current.guides, options.trust);
+  motion::Resampling plan =
+      motion::planResampling(neighbour.guides, positions, current.guides, options.trust);
+  Image moved = motion::resample(
+      plan, withHistory ? stacked(neighbour.denoised, neighbour.history) : neighbour.denoised);
   if (withHistory) {
-    out.history = channelsOf(moved.image, 3, 3);
+    out.history = channelsOf(moved, 3, 3);
     out.historyWeight = std::move(still);
-    moved.image = channelsOf(moved.image, 0, 3);
+    moved = channelsOf(moved, 0, 3);
   }
+  const Image& trust = plan.trust;
   const Image neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
   const Image residual = motion::reprojectNearest(
       difference(neighbourNoisy, tonemapped(neighbour.denoised, centre.scale)), positions);
-  if (correlation(centre.residual, residual, moved.trust) > options.repeatedNoiseCorrelation) {
+  if (correlation(centre.residual, residual, trust) > options.repeatedNoiseCorrelation) {
     out.verdict = Contribution::Verdict::RepeatedNoise;
     return out;
   }
-  out.image = std::move(moved.image);
-  double fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
+  out.image = std::move(moved);
+  double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
   // Where the light changed over most of the frame (a moving lamp), the
   // differences' own spread is large too, and shading changes too faint for
   // the per-pixel tests are everywhere. Such a neighbour is brought to the
   // frame's light first, and left out whole if that does not bring its
   // spread down. Below that, the cap keeps moving shadows rejected.
   if (fullSpread > options.changedLightSpread) {
-    out.relight = relightFactor(out.image, current.denoised, moved.trust, options.relightBox);
+    out.relight = relightFactor(out.image, current.denoised, trust, options.relightBox);
     out.image = scaled(std::move(out.image), out.relight);
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
-    fullSpread = robustSpread(normalisedDifference(centre, out.image), moved.trust);
+    fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
     if (fullSpread > options.changedLightSpread) {
       out.verdict = Contribution::Verdict::ChangedLight;
       return out;
@@ -340,18 +343,18 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   out.weight.assign(out.image.pixelCount(), 0.0);
   // The renders' own light test would see the change that relighting undid.
   if (out.verdict == Contribution::Verdict::Relit) {
-    std::copy(moved.trust.pixels.begin(), moved.trust.pixels.end(), out.weight.begin());
-    out.positions = std::move(positions);
+    std::copy(trust.pixels.begin(), trust.pixels.end(), out.weight.begin());
+    out.resampling = std::move(plan);
     return out;
   }
   const std::vector<float> changed =
-      lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions),
-                  moved.trust, centre.residual, residual, options.lightBox);
+      lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
+                  centre.residual, residual, options.lightBox);
   for (std::size_t i = 0; i < out.weight.size(); ++i)
-    out.weight[i] = moved.trust.pixels[i] * std::clamp((options.lightHigh - changed[i]) /
-                                                           (options.lightHigh - options.lightLow),
-                                                       0.0, 1.0);
-  out.positions = std::move(positions);
+    out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - changed[i]) /
+                                                     (options.lightHigh - options.lightLow),
+                                                 0.0, 1.0);
+  out.resampling = std::move(plan);
   return out;
 }
 
@@ -363,17 +366,39 @@ struct WeightedMean {
   std::vector<double> weight;
 };
 
-WeightedMean weightedMean(const Image& own, const std::vector<Contribution>& contributions) {
+// A neighbour's image brought into the frame and its weights per pixel.
+struct Weighted {
+  const Image* image;
+  const std::vector<double>* weight;
+};
+
+WeightedMean weightedMean(const Image& own, const std::vector<Weighted>& others) {
+  const int channels = own.channels;
   WeightedMean out{{own.pixels.begin(), own.pixels.end()},
                    std::vector<double>(own.pixelCount(), 1.0)};
-  for (const Contribution& k : contributions)
-    for (std::size_t i = 0; i < k.weight.size(); ++i) {
-      if (k.weight[i] <= 0.0) continue;
-      out.weight[i] += k.weight[i];
-      for (int ch = 0; ch < 3; ++ch)
-        out.value[3 * i + ch] += k.weight[i] * k.image.pixels[3 * i + ch];
+  for (const Weighted& k : others) {
+    const std::vector<double>& weight = *k.weight;
+    for (std::size_t i = 0; i < weight.size(); ++i) {
+      if (weight[i] <= 0.0) continue;
+      out.weight[i] += weight[i];
+      for (int ch = 0; ch < channels; ++ch)
+        out.value[channels * i + ch] += weight[i] * k.image->pixels[channels * i + ch];
     }
-  for (std::size_t i = 0; i < out.value.size(); ++i) out.value[i] /= out.weight[i / 3];
+  }
+  for (std::size_t i = 0; i < out.value.size(); ++i) out.value[i] /= out.weight[i / channels];
+  return out;
+}
+
+WeightedMean weightedMean(const Image& own, const std::vector<Contribution>& contributions) {
+  std::vector<Weighted> others;
+  for (const Contribution& k : contributions) others.push_back({&k.image, &k.weight});
+  return weightedMean(own, others);
+}
+
+Image toImage(const std::vector<double>& values, const Image& shape) {
+  Image out(shape.width, shape.height, shape.channels);
+  std::transform(values.begin(), values.end(), out.pixels.begin(),
+                 [](double v) { return static_cast<float>(v); });
   return out;
 }
 
@@ -441,7 +466,7 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     const Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
-    Image moved = motion::reprojectNearest(frames[k]->noisy, c.positions);
+    Image moved = motion::reprojectNearest(frames[k]->noisy, c.resampling.positions);
     if (c.verdict == Contribution::Verdict::Relit) moved = scaled(std::move(moved), c.relight);
     for (std::size_t i = 0; i < n; ++i) {
       const double w = c.weight[i];
@@ -478,6 +503,23 @@ PastHistories pastHistoriesOf(std::vector<Contribution>& contributions, const Ce
   return out;
 }
 
+// The neighbours' taps and final weights, for filterWith: those left out
+// whole carry none.
+FilterWeights weightsOf(std::vector<Contribution> contributions,
+                        const std::vector<std::size_t>& indices, std::size_t centre,
+                        const TemporalOptions& options) {
+  FilterWeights out;
+  out.centre = centre;
+  out.relightBox = options.relightBox;
+  for (std::size_t k = 0; k < contributions.size(); ++k) {
+    Contribution& c = contributions[k];
+    if (c.weight.empty()) continue;
+    out.neighbours.push_back({indices[k], std::move(c.resampling),
+                              c.verdict == Contribution::Verdict::Relit, std::move(c.weight)});
+  }
+  return out;
+}
+
 }  // namespace
 
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
@@ -489,6 +531,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   // with the chain of frames its motion is followed along; a gap ends a side.
   struct Neighbour {
     const WindowFrame* frame;
+    std::size_t index;  // in the window
     std::vector<motion::FrameGeometry> chain;
     bool forward;
   };
@@ -500,7 +543,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
       if (index < 0 || index >= static_cast<long>(window.size()) || !window[index]) break;
       if (window[index]->motion.empty() || current.motion.empty()) break;
       chain.push_back(geometryOf(*window[index]));
-      neighbours.push_back({window[index], chain, side > 0});
+      neighbours.push_back({window[index], static_cast<std::size_t>(index), chain, side > 0});
     }
   }
   const Centre c = centreOf(current);
@@ -516,9 +559,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
 
   const WeightedMean mean = weightedMean(current.denoised, contributions);
   TemporalResult result;
-  result.color = Image(current.denoised.width, current.denoised.height, 3);
-  std::transform(mean.value.begin(), mean.value.end(), result.color.pixels.begin(),
-                 [](double v) { return static_cast<float>(v); });
+  result.color = toImage(mean.value, current.denoised);
   result.stats.neighbours = static_cast<int>(neighbours.size());
   for (const Contribution& k : contributions) {
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
@@ -537,7 +578,30 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   double share = 0.0;
   for (double w : mean.weight) share += 1.0 - 1.0 / w;
   result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());
+  std::vector<std::size_t> indices;
+  for (const Neighbour& nb : neighbours) indices.push_back(nb.index);
+  result.weights = weightsOf(std::move(contributions), indices, centre, options);
   return result;
+}
+
+Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images) {
+  if (weights.centre >= images.size() || !images[weights.centre])
+    throw std::invalid_argument("filterWith: the centre frame's image is missing");
+  const Image& own = *images[weights.centre];
+  std::vector<Image> moved;
+  std::vector<const NeighbourWeights*> used;
+  for (const NeighbourWeights& nb : weights.neighbours) {
+    const Image* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
+    if (!image || !image->sameShape(own)) continue;
+    Image in = motion::resample(nb.resampling, *image);
+    if (nb.relit)
+      in = scaled(std::move(in), relightFactor(in, own, nb.resampling.trust, weights.relightBox));
+    moved.push_back(std::move(in));
+    used.push_back(&nb);
+  }
+  std::vector<Weighted> others;
+  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]->weight});
+  return toImage(weightedMean(own, others).value, own);
 }
 
 Image historyMean(const Image& own, const TemporalResult& result, const TemporalOptions& options) {

@@ -62,6 +62,24 @@ struct Reprojected {
 Reprojected reproject(const Image& source, const Guides& sourceGuides, const Image& positions,
                       const Guides& currentGuides, const TrustOptions& options = {});
 
+// Which taps reproject takes at each pixel, decided once by the guides, so
+// that any image of the same neighbour (a light pass) is brought in with the
+// same taps and the same weights as `source` was, without the guide tests:
+// reproject(image, ...) == {resample(plan, image), plan.trust}, bit for bit.
+struct Resampling {
+  Image positions;  // as given to planResampling
+  // Per pixel: bits 0-3 the bilinear taps whose surface matched (none: not
+  // brought in), bit 4 Catmull-Rom's 16 taps all matched (cubic allowed
+  // where no channel of its result is negative).
+  std::vector<unsigned char> taps;
+  Image trust;  // reproject's
+  bool empty() const { return taps.empty(); }
+};
+Resampling planResampling(const Guides& sourceGuides, const Image& positions,
+                          const Guides& currentGuides, const TrustOptions& options = {});
+// `source` (any channel count) brought in by `plan`; zeros where trust is 0.
+Image resample(const Resampling& plan, const Image& source);
+
 // Nearest-pixel resampling (no filtering: noise stays uncorrelated), for the
 // repeated-noise test. Zeros where positions are NaN.
 Image reprojectNearest(const Image& source, const Image& positions);

@@ -53,11 +53,17 @@ struct PassDenoiseOptions {
   ShareRule share = ShareRule::None;
   int errorRadius = 2;  // ShareRule::Error: box radius of the local mean, pixels
   int noiseRadius = 8;  // ShareRule::RelativeNoise: box radius, pixels
+  // The residual denoised alone too (two network runs: its positive and
+  // negative parts). Only a sharing rule reads it: with ShareRule::None the
+  // sum closes it (dndenoise leaves it out).
+  bool residualAlone = true;
 };
 
 struct DenoisedPasses {
-  LightPassImages passes;       // by key, the residual included: recombine() is the beauty
-  LightPassImages independent;  // each pass denoised alone, before the sharing
+  LightPassImages passes;  // by key, the residual included: recombine() is the beauty
+  // Each pass before the sharing: denoised alone (on a sequence, filtered over
+  // time); the residual only where denoised alone (residualAlone).
+  LightPassImages independent;
   double maxRelativeError = 0;  // recombine(passes) against the denoised beauty
 };
 
@@ -87,6 +93,11 @@ DenoisedPasses denoiseLightPasses(const OidnBase& base, const FrameBuffers& fram
 std::map<std::string, Image> denoisedPassLayers(const LightPassLayout& layout,
                                                 const LightPassImages& passes);
 
+// The light passes of `path` in the view layer of `frame` (its colour's
+// layer). Throws IoError with one line naming `path` when it has no light
+// passes or `frame` lacks albedo and normal.
+LightPassLayout passLayoutOfFrame(const std::string& path, const FrameBuffers& frame);
+
 // For dndenoise --passes: the file's light passes found, read, denoised
 // against `denoisedBeauty` and named for writing. Throws IoError with one line
 // naming `path` when it has no light passes or lacks albedo and normal.
@@ -108,7 +119,8 @@ LightPassLayout lightPassesOfFile(const std::string& path, const std::string& vi
 void requireLightPasses(const std::string& path, const std::string& viewLayer = "");
 
 // The network runs of the passes as `denoise` runs the beauty's (device,
-// tiling, memory); the rest as the defaults.
+// tiling, memory); the residual not denoised alone (the sum closes it); the
+// rest as the defaults.
 PassDenoiseOptions passOptionsFor(const DenoiseOptions& denoise);
 
 // The pretrained OIDN base of a model file (throws IoError naming the file

@@ -31,11 +31,22 @@ struct SequenceSettings {
   TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
 };
 
+// An image made per frame beside its colour (a renderer's light pass,
+// denoised alone), filtered over the window with the colour's weights.
+struct Companion {
+  Image image;           // the frame's size, any channel count
+  bool overTime = true;  // false: kept as made
+};
+using Companions = std::map<std::string, Companion>;
+
 class Sequence {
  public:
   using Read = std::function<FrameBuffers(const std::string& path)>;
   // Denoises `frame`, which is the frame of file `path`.
   using Denoise = std::function<DenoiseResult(const std::string& path, const FrameBuffers& frame)>;
+  // A frame's companions, from its file and its buffers as Read gives them.
+  using MakeCompanions =
+      std::function<Companions(const std::string& path, const FrameBuffers& frame)>;
 
   // The plan for the frames `files` of `pattern` ("shot.#.exr"), or nullptr:
   // no files, a file not of the pattern, or no motion vectors (then `why`
@@ -50,6 +61,18 @@ class Sequence {
   // Neighbours are read and denoised here as needed and kept while in the window.
   DenoiseResult denoise(const std::string& file, const FrameBuffers& frame, const Read& read,
                         const Denoise& denoise);
+
+  // The same, and the frame's companions by name, each filtered over the
+  // window with the colour's weights (the same neighbours, taps and per-pixel
+  // weights; dn::temporal::filterWith), or as made where not overTime. Each
+  // frame's are made once, by `make`, for the frames the colour took
+  // something from, and kept while the frame is in the window.
+  struct WithCompanions {
+    DenoiseResult result;
+    std::map<std::string, Image> companions;
+  };
+  WithCompanions denoise(const std::string& file, const FrameBuffers& frame, const Read& read,
+                         const Denoise& denoise, const MakeCompanions& make);
   // The same with `denoiser`: each frame read with the buffers it needs.
   DenoiseResult denoise(const std::string& file, const Denoiser& denoiser,
                         const DenoiseOptions& options);
@@ -81,6 +104,12 @@ class Sequence {
   // Makes the denoised histories of the frames within the window before `number`
   // that lack one.
   void makePastHistories(int number, const Read& read, const Denoise& denoise);
+  // Frame `number`'s companions, made by `make` (from `given`, or read) if not yet.
+  const Companions& companionsOf(int number, const FrameBuffers* given, const Read& read,
+                                 const MakeCompanions& make);
+  std::map<std::string, Image> filteredCompanions(int number, const FrameBuffers& frame,
+                                                  const FilterWeights& weights, const Read& read,
+                                                  const MakeCompanions& make);
   std::string fileOf(int number) const;
   void forget(int number);
 

@@ -104,8 +104,28 @@ struct PastHistories {
   bool empty() const { return images.empty(); }
 };
 
+// What filterFrame did with one neighbour, so that any other image of the
+// window's frames (a light pass denoised alone) is filtered as the colour
+// was, without the tests: the same taps, the same per-pixel weights.
+struct NeighbourWeights {
+  std::size_t frame = 0;          // its index in the window
+  motion::Resampling resampling;  // how its images are brought into the frame
+  // Brought to the frame's light first (a lamp moved): each image by its own
+  // factor, the ratio of its box means over the trusted pixels.
+  bool relit = false;
+  std::vector<double> weight;  // per pixel, after every test; the frame's own weighs 1
+};
+
+struct FilterWeights {
+  std::size_t centre = 0;
+  int relightBox = 1;
+  std::vector<NeighbourWeights> neighbours;  // those it used, in the order of its sums
+  bool empty() const { return neighbours.empty(); }
+};
+
 struct TemporalResult {
-  Image color;  // the filtered results
+  Image color;            // the filtered results
+  FilterWeights weights;  // how they were filtered
   // The noisy renders accumulated with the same weights, and per pixel the
   // effective number of frames in it; empty where accumulatedShare is 0.
   Image history;
@@ -119,6 +139,16 @@ struct TemporalResult {
 // the frame itself. Deterministic: depends only on the frames given.
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
                            const TemporalOptions& options = {});
+
+// `images[k]` (window frame k's image of any channel count, nullptr where it
+// has none, and that neighbour is then left out) filtered over the window by
+// `weights`: the centre's image weighs 1, each neighbour's brought in and
+// weighed as filterFrame did. With the frames' denoised results it gives
+// TemporalResult::color bit for bit (Catmull-Rom falls back to bilinear where
+// an image's own values would overshoot below 0, so with the past's histories
+// stacked in, a pixel where theirs did may differ). Throws
+// std::invalid_argument when the centre's image is missing.
+Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images);
 
 // The frame's accumulated render, denoised (`own`), averaged with its past
 // neighbours' as its result was with theirs where the surface stood still,

@@ -1,0 +1,44 @@
+// Light passes on a frame sequence (dndenoise --passes on shot.#.exr with
+// motion vectors): each frame's passes denoised alone, as for one frame, then
+// filtered over the window with the beauty's weights (the same neighbours,
+// reprojection and per-pixel weights: dn::temporal::Sequence's companions),
+// and the residual set to the frame's denoised beauty minus the rest, so the
+// renderer's rule still holds exactly. The residual then holds what the
+// passes do not explain (the beauty's denoised history blended in), not
+// their flicker.
+#pragma once
+
+#include <map>
+#include <string>
+
+#include "dn/passes/joint_denoise.h"
+#include "dn/temporal/sequence.h"
+
+namespace dn {
+
+// Which passes are filtered over time.
+enum class PassesOverTime {
+  Light,  // the light passes; the colour passes as denoised alone (the default, measured)
+  All,    // the colour passes too
+  Off,    // none: every pass as denoised alone, the residual takes the beauty's filtering
+};
+
+struct SequencePassOptions {
+  PassDenoiseOptions denoise;
+  PassesOverTime overTime = PassesOverTime::Light;
+};
+
+// A frame's passes (readLightPasses of the file's layout), each denoised
+// alone, the residual left out (the sum closes it), marked for filtering over
+// time by options.overTime. Throws IoError with one line naming the file
+// when it has no light passes or lacks albedo and normal.
+temporal::Sequence::MakeCompanions lightPassCompanions(const OidnBase& base,
+                                                       const SequencePassOptions& options);
+
+// The frame's passes as filtered (Sequence's companions of lightPassCompanions)
+// made to recombine to `denoisedBeauty`, and named for writing.
+PassesResult passesOfSequenceFrame(const std::string& path, const FrameBuffers& frame,
+                                   const std::map<std::string, Image>& filtered,
+                                   const Image& denoisedBeauty, const SequencePassOptions& options);
+
+}  // namespace dn
