@@ -13,8 +13,8 @@ Writes, as shots.py does (half-float multilayer EXR, the same passes, the noise
 seed animated): DIR/spp<N>.<frame>.exr for frames 1-8; references only for the
 scored frames (REF_FRAMES), two of different seeds each, DIR/ref.<frame>.exr and
 DIR/ref2.<frame>.exr (a shot where nothing moves: one DIR/ref.exr and DIR/ref2.exr).
-experiments/temporal_eval.py --ref-frames scores the frames that have references and
-subtracts the references' own noise, estimated from the pair (--ref-noise pair).
+experiments/temporal_eval.py scores the frames that have references and, with
+--ref-noise pair, takes the references' own noise, estimated from the pair, out of PSNR.
 
 The scene-building helpers are shots.py's.
 """
