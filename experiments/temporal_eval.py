@@ -130,29 +130,48 @@ def denoise(args, scene, spp, method, out):
     return run(cmd, log=os.path.join(out, method + ".log"))[0]
 
 
-def scored_results(out, spp, method, frames, every):
-    """The pattern of a method's results on the scored frames: its own folder when
-    every frame is scored, else a folder of links to the scored ones."""
-    if frames == every:
-        return os.path.join(out, method, f"spp{spp}.#.exr")
-    links = os.path.join(out, "scored", method)
-    os.makedirs(links, exist_ok=True)
+def runs(frames):
+    """The frames in stretches of consecutive numbers: [3, 4, 7, 8] -> [[3, 4], [7, 8]]."""
+    stretches = []
     for f in frames:
-        link = os.path.join(links, f"spp{spp}.{f:04d}.exr")
-        if not os.path.lexists(link):
-            os.symlink(os.path.join("..", "..", method, f"spp{spp}.{f:04d}.exr"), link)
-    return os.path.join(links, f"spp{spp}.#.exr")
+        if stretches and f == stretches[-1][-1] + 1:
+            stretches[-1].append(f)
+        else:
+            stretches.append([f])
+    return stretches
 
 
-def compare(args, ref, test, video=False):
-    """dnmetrics over a sequence: {frame: row}; the flicker of a frame kept only where
-    the frame before it was compared too. With video, also the FovVideoVDP JOD."""
-    cmd = [args.dnmetrics, ref, test, "--metrics", "psnr,flip", "--format", "json"]
-    if video:
-        cmd += ["--fvvdp", "--fvvdp-python", args.fvvdp_python, "--fps", "24"]
-    rows = json.loads(run(cmd)[1])["results"]
-    jod = rows.pop()["fvvdp"] if video else None  # the sequence's own row, last
-    by_frame = {number(r["file"]): r for r in rows}
+def linked(folder, name, frames, links):
+    """Patterns for folder/name.<frame>.exr on the given frames: the folder's own when
+    it holds just those and they follow each other, else one folder of links per
+    stretch of consecutive frames (a dnmetrics sequence has no gaps)."""
+    present = sorted(number(p) for p in glob.glob(os.path.join(folder, f"{name}.[0-9][0-9][0-9][0-9].exr")))
+    if present == frames and len(runs(frames)) == 1:
+        return [os.path.join(folder, f"{name}.#.exr")]
+    patterns = []
+    for stretch in runs(frames):
+        target = os.path.join(links, f"{stretch[0]:04d}")
+        os.makedirs(target, exist_ok=True)
+        for f in stretch:
+            link = os.path.join(target, f"{name}.{f:04d}.exr")
+            if not os.path.lexists(link):
+                os.symlink(os.path.abspath(os.path.join(folder, f"{name}.{f:04d}.exr")), link)
+        patterns.append(os.path.join(target, f"{name}.#.exr"))
+    return patterns
+
+
+def compare(args, ref, tests, video=False):
+    """dnmetrics over sequences (patterns, each without gaps): {frame: row}; the
+    flicker of a frame only where the frame before it was compared too. With video
+    (one pattern), also the FovVideoVDP JOD."""
+    by_frame, jod = {}, None
+    for test in tests:
+        cmd = [args.dnmetrics, ref, test, "--metrics", "psnr,flip", "--format", "json"]
+        if video:
+            cmd += ["--fvvdp", "--fvvdp-python", args.fvvdp_python, "--fps", "24"]
+        rows = json.loads(run(cmd)[1])["results"]
+        jod = rows.pop()["fvvdp"] if video else None  # the sequence's own row, last
+        by_frame.update({number(r["file"]): r for r in rows})
     for f, r in by_frame.items():
         for key in ("psnr", "flip", "flicker"):  # JSON has "inf" and "nan" as strings
             if isinstance(r.get(key), str):
@@ -173,7 +192,7 @@ def reference_noise(args, scene, frames):
     if "#" not in first:  # one shared pair
         row = json.loads(run([args.dnmetrics, first, second, "--metrics", "psnr", "--format", "json"])[1])["results"][0]
         return {f: {"mse": mse_of(row["psnr"]), "flicker": 0.0 if f - 1 in frames else None} for f in frames}
-    rows, _ = compare(args, first, second)
+    rows, _ = compare(args, first, linked(folder, "ref2", frames, os.path.join(args.out, scene, "ref2")))
     missing = [f for f in frames if f not in rows]
     if missing:
         sys.exit(f"temporal_eval: --ref-noise pair: {scene} has no ref2 for frames {missing}")
@@ -185,15 +204,14 @@ def score(args, scene, spp, method, out, frames, noise):
     the frames' FovVideoVDP as one 24 fps video (None without). With noise (per
     frame, reference_noise) PSNR has the references' noise taken out (docstring)."""
     folder = os.path.join(args.data, scene)
-    every = [number(p) for p in frames_of(folder, spp)]
-    test = scored_results(out, spp, method, frames, every)
-    video = bool(args.fvvdp_python) and frames == every
-    rows, jod = compare(args, reference(folder), test, video)
+    tests = linked(os.path.join(out, method), f"spp{spp}", frames, os.path.join(out, "scored", method))
+    video = bool(args.fvvdp_python) and len(tests) == 1
+    rows, jod = compare(args, reference(folder), tests, video)
     result = {"frames": frames, "fvvdp": jod,
               "psnr": {f: rows[f]["psnr"] for f in frames}, "flip": {f: rows[f]["flip"] for f in frames},
               "flicker": {f: rows[f]["flicker"] for f in frames if rows[f]["flicker"] is not None}}
     if noise:
-        second, _ = compare(args, reference(folder, "ref2"), test)
+        second, _ = compare(args, reference(folder, "ref2"), tests)
         result["psnr_against_ref"] = result["psnr"]
         result["psnr"] = {}
         for f in frames:
