@@ -21,8 +21,8 @@ and with FovVideoVDP as a 24 fps video where --fvvdp-python names an
 interpreter that has pyfvvdp (dnmetrics --fvvdp; JOD, higher is better).
 Prints a Markdown table (means over frames; the worst per-frame PSNR change
 against fbf; wall time of the dndenoise runs), then a summary per scene
-(temporal against prefilter frame by frame, flicker against prefilter's, the
-worst frame against fbf) and the mean over the scenes, and writes
+(filter and temporal against prefilter frame by frame, FLIP, flicker against
+prefilter's, the worst frame against fbf) and the mean over the scenes, and writes
 OUT/results.json (every frame's scores). Existing outputs are reused unless --force.
 
 Scored frames: every frame has a reference (ref.<frame>.exr), or one shared
@@ -41,8 +41,9 @@ all in the Reinhard space of dnmetrics' PSNR (MSE = 10^(-PSNR/10)); PSNR is then
 -10 log10 of that estimate. FLIP and flicker are the means of the scores
 against the two references, not corrected (noise in the reference raises both
 for every method alike); the summary gives the flicker the references' noise
-alone adds, the pair's flicker / sqrt 2 (about what a perfect result scores on
-consecutive scored frames; 0 with a shared reference, whose noise cancels).
+alone adds, the pair's flicker / sqrt 2 as a share of prefilter's (about what a
+perfect result scores on consecutive scored frames; 0 with a shared reference,
+whose noise cancels).
 """
 
 import argparse
@@ -236,17 +237,20 @@ def mean(values):
 
 
 def summary_row(scores, noise):
-    """temporal against prefilter and fbf, frame by frame, on one scene at one spp."""
+    """temporal (and filter) against prefilter and fbf, frame by frame, on one scene at one spp."""
     t, p, fbf = scores["temporal"], scores["prefilter"], scores["fbf"]
     frames = t["frames"]
     pair = [noise[f]["flicker"] for f in frames if noise and noise[f]["flicker"] is not None]
-    return {"gain_db": mean([t["psnr"][f] - p["psnr"][f] for f in frames]),
+    return {"prefilter_psnr": mean(p["psnr"]),
+            "gain_db": mean([t["psnr"][f] - p["psnr"][f] for f in frames]),
+            "filter_gain_db": mean([scores["filter"]["psnr"][f] - p["psnr"][f] for f in frames]),
             "flip": mean(t["flip"]), "flip_prefilter": mean(p["flip"]),
             "flicker_ratio": mean(t["flicker"]) / mean(p["flicker"]) if t["flicker"] else math.nan,
             "worst_vs_fbf_db": min(t["psnr"][f] - fbf["psnr"][f] for f in frames),
             "worst_frame": min(frames, key=lambda f: t["psnr"][f] - fbf["psnr"][f]),
             "ref_pair_psnr": psnr_of(mean([noise[f]["mse"] for f in frames])) if noise else None,
-            "flicker_floor": mean(pair) / math.sqrt(2) if pair else (0.0 if noise else None)}
+            "flicker_floor_ratio": (mean(pair) / math.sqrt(2) if pair else 0.0) / mean(p["flicker"])
+                                   if noise and p["flicker"] else None}
 
 
 def main():
@@ -314,26 +318,26 @@ def main():
         print("| scene | spp | frame | " + " | ".join(METHODS) + (" | ref vs ref2 |" if pair else " |"))
         print("|---|---|---|" + "---|" * (len(METHODS) + pair))
         print("\n".join(per_frame))
-    print("\ntemporal (the default) against OIDN's prefilter mode, frame by frame, and against fbf:\n")
-    print("| scene | spp | frames | PSNR gain over prefilter dB | FLIP temporal / prefilter | "
-          "flicker / prefilter's | worst frame vs fbf dB | ref vs ref2 dB | flicker floor / prefilter's |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("\nAgainst OIDN's prefilter mode frame by frame (gains: mean over the scored frames of the "
+          "PSNR difference, dB); the worst frame: temporal against fbf; flicker as a share of OIDN-pre's:\n")
+    print("| shot | spp | frames | OIDN-pre PSNR | filter | temporal (default) | worst frame vs fbf | "
+          "FLIP pre / temporal | flicker vs OIDN-pre | ref vs ref2 dB | of which the references' noise |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for spp in args.spp:
-        rows = []
-        for scene in args.scenes:
-            r = summary[f"{scene}/spp{spp}"]
-            rows.append(r)
-            prefilter = mean(results[f"{scene}/spp{spp}"]["scores"]["prefilter"]["flicker"])
+        rows = [summary[f"{scene}/spp{spp}"] for scene in args.scenes]
+        for scene, r in zip(args.scenes, rows):
             frames = results[f"{scene}/spp{spp}"]["scores"]["temporal"]["frames"]
-            floor = f"{r['flicker_floor'] / prefilter:.2f}" if r["flicker_floor"] is not None and prefilter else "-"
-            ref_pair = f"{r['ref_pair_psnr']:.2f}" if r["ref_pair_psnr"] is not None else "-"
-            print(f"| {scene} | {spp} | {','.join(map(str, frames))} | {r['gain_db']:+.2f} | "
-                  f"{r['flip']:.4f} / {r['flip_prefilter']:.4f} | {r['flicker_ratio']:.2f} | "
-                  f"{r['worst_vs_fbf_db']:+.2f} (frame {r['worst_frame']}) | {ref_pair} | {floor} |")
-        print(f"| **mean of {len(rows)}** | {spp} | | {mean([r['gain_db'] for r in rows]):+.2f} | "
-              f"{mean([r['flip'] for r in rows]):.4f} / {mean([r['flip_prefilter'] for r in rows]):.4f} | "
-              f"{mean([r['flicker_ratio'] for r in rows]):.2f} | "
-              f"{min(r['worst_vs_fbf_db'] for r in rows):+.2f} (worst) | | |", flush=True)
+            span = f"{frames[0]}-{frames[-1]}" if frames == list(range(frames[0], frames[-1] + 1)) else \
+                ",".join(map(str, frames))
+            pair = f"{r['ref_pair_psnr']:.2f}" if r["ref_pair_psnr"] is not None else "-"
+            floor = f"{100 * r['flicker_floor_ratio']:.0f} %" if r["flicker_floor_ratio"] is not None else "-"
+            print(f"| {scene} | {spp} | {span} | {r['prefilter_psnr']:.2f} | {r['filter_gain_db']:+.2f} | "
+                  f"{r['gain_db']:+.2f} | {r['worst_vs_fbf_db']:+.2f} (frame {r['worst_frame']}) | "
+                  f"{r['flip_prefilter']:.4f} / {r['flip']:.4f} | {100 * r['flicker_ratio']:.0f} % | {pair} | {floor} |")
+        print(f"| **mean** | {spp} | | | {mean([r['filter_gain_db'] for r in rows]):+.2f} | "
+              f"**{mean([r['gain_db'] for r in rows]):+.2f}** | {min(r['worst_vs_fbf_db'] for r in rows):+.2f} (worst) | "
+              f"{mean([r['flip_prefilter'] for r in rows]):.4f} / {mean([r['flip'] for r in rows]):.4f} | "
+              f"{100 * mean([r['flicker_ratio'] for r in rows]):.0f} % | | |", flush=True)
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(results, f, indent=1)
 
