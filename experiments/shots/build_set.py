@@ -19,6 +19,7 @@ render a smaller set into another folder).
 import argparse
 import concurrent.futures
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -29,6 +30,11 @@ BPY_PYTHON = os.path.join(os.environ.get("DN_BPY_VENV") or os.path.normpath(os.p
                           "bin", "python")
 # The two sets: the 128x96 shots (shots.py) and the crops of 1080p frames (shots_1080.py).
 SCRIPTS = {"evaluation": "shots.py", "production": "shots_1080.py"}
+
+
+def children_cpu():
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def listing(python, script):
@@ -100,7 +106,7 @@ def main():
         missing = expected(folder, *shots[shot], checks, extra)
         if not missing:
             return "%s: complete" % shot
-        start = time.time()
+        start, cpu = time.time(), children_cpu()
         cmd = [args.python, os.path.join(HERE, script), "--shot", shot, "--out", folder, "--threads", str(threads)]
         if args.set == "evaluation":
             cmd += ["--check-frames", args.check_frames]
@@ -108,7 +114,9 @@ def main():
         with open(os.path.join(args.out, shot + ".log"), "a") as log:
             code = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
         state = "done" if code == 0 else "FAILED (exit %d, see %s.log)" % (code, shot)
-        return "%s: %s in %.0f s" % (shot, state, time.time() - start)
+        # CPU time over the threads: the wall time on cores no one else uses (with --jobs 1)
+        return "%s: %s in %.0f s (%.0f s of CPU / %d threads)" % (shot, state, time.time() - start,
+                                                                 (children_cpu() - cpu) / threads, threads)
 
     start = time.time()
     print("build_set: %d %s shots into %s, %s" % (len(args.shots), args.set, args.out, time.strftime("%Y-%m-%d %H:%M:%S")),
