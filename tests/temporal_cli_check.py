@@ -6,7 +6,8 @@ again unless --temporal filter, -v says per frame how much came from history
 and over how many frames the render was accumulated, a frame's result does
 not depend on how the shot was split into runs (bit-identical pixels), and a
 sequence without motion vectors is denoised frame by frame with one line
-saying so. Also dnmetrics on the sequences (per-frame rows, flicker).
+saying so, as is a single frame of a sequence without its Vector pass (its
+neighbours' chains stop at it). Also dnmetrics on the sequences (per-frame rows, flicker).
 
   temporal_cli_check.py --dndenoise BIN --dnmetrics BIN --testdata DIR --work-dir DIR
 """
@@ -19,6 +20,7 @@ import subprocess
 import sys
 
 import numpy as np
+import OpenEXR
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from exr_numpy import read_rgb  # noqa: E402
@@ -37,6 +39,13 @@ def check(condition, what):
     if not condition:
         sys.exit("FAIL: " + what)
     print("ok:", what)
+
+
+def without_vectors(source, target):
+    """The frame with its Vector pass left out (every other channel kept)."""
+    frame = OpenEXR.File(source, separate_channels=True)
+    kept = {name: c for name, c in frame.channels().items() if ".Vector." not in name}
+    OpenEXR.File(frame.header(), kept).write(target)
 
 
 def main():
@@ -93,6 +102,23 @@ def main():
                  os.path.join(work, "novec_out.#.exr"), "--rgb-only"] + fast)
     notes = [l for l in novec.stderr.splitlines() if "frame by frame" in l]
     check(len(notes) == 1 and "no motion vectors" in notes[0], "no motion vectors: one line, frame by frame")
+
+    # One frame without its Vector pass: denoised alone, one line saying why; its
+    # neighbours' chains stop at it.
+    gap = os.path.join(work, "gap")
+    os.makedirs(gap)
+    for n in FRAMES:
+        source = os.path.join(args.testdata, "sequence", f"spp4.{n:04d}.exr")
+        target = os.path.join(gap, f"spp4.{n:04d}.exr")
+        without_vectors(source, target) if n == 3 else shutil.copy(source, target)
+    result = run([args.dndenoise, os.path.join(gap, "spp4.#.exr"), "-o", os.path.join(work, "gap_out.#.exr"),
+                  "--rgb-only", "--window", "2", "-v"] + fast)
+    notes = [l for l in result.stderr.splitlines() if "no motion vectors" in l]
+    check(len(notes) == 1 and "spp4.0003.exr" in notes[0] and "denoised alone" in notes[0]
+          and "chains stop at it" in notes[0], "a frame without the Vector pass: one line saying why it is alone")
+    history = [l for l in result.stderr.splitlines() if "from history" in l]
+    check("(0 neighbours" in history[2] and "(1 neighbour" in history[1] and "(2 neighbours" in history[3],
+          "its neighbours' chains stop at it (frame 2: frame 1 alone; frame 4: frames 5 and 6)")
 
     for bad in (["--window", "0"], ["--temporal", "maybe"], ["--window", "9"]):
         result = run(base + ["-o", os.path.join(work, "bad.#.exr")] + bad, expect=1)

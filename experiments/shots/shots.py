@@ -176,6 +176,26 @@ def sphere(name, centre, radius, mat):
     return obj
 
 
+def cylinder(name, centre, radius, depth, mat, smooth=True):
+    bpy.ops.mesh.primitive_cylinder_add(location=centre, radius=radius, depth=depth, vertices=64)
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.data.materials.append(mat)
+    if smooth:  # smooth sides, flat caps
+        bpy.ops.object.shade_smooth_by_angle(angle=math.radians(40))
+    return obj
+
+
+def play(action):
+    """Play one of the imported armature's actions (the Fox's Walk, Run or Survey) in
+    place of the clips the importer stacked in the NLA."""
+    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
+    for track in list(arm.animation_data.nla_tracks):
+        arm.animation_data.nla_tracks.remove(track)
+    arm.animation_data.action = bpy.data.actions[action]
+    return arm
+
+
 def model(name, size, location=(0, 0, 0), turn=0.0, drop=()):
     """A glTF sample model from assets/gltf under one empty: its largest extent (as
     posed at import) `size` metres, standing on z = location.z, centred on location
@@ -352,10 +372,7 @@ def fox_walk():
          material("wall", (0.75, 0.7, 0.6), 0.9))
     sun_through_window(10.0, 35.0, 200.0)
     fox = model("Fox", 1.0, (-2.2, 3.0, 0), -math.pi / 2)
-    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    for track in list(arm.animation_data.nla_tracks):
-        arm.animation_data.nla_tracks.remove(track)
-    arm.animation_data.action = bpy.data.actions["Walk"]
+    play("Walk")
     drive(fox, "location", 0, "-2.2 + 0.08 * frame")  # about a walking pace
     model("SheenChair", 0.9, (1.2, 4.2, 0), -2.4)
     cam, aim = camera((-0.6, 1.0, 1.0), (-1.9, 3.0, 0.35), 30)
@@ -484,10 +501,7 @@ def fox_yard():
     for i in range(7):
         box("bollard%d" % i, (-4.5 + 1.5 * i, 2.6, 0.35), (0.12, 0.12, 0.7), material("bollard", (0.3, 0.3, 0.32), 0.4))
     fox = model("Fox", 1.3, (-3.0, 1.0, 0), -math.pi / 2)
-    arm = next(o for o in bpy.data.objects if o.type == "ARMATURE")
-    for track in list(arm.animation_data.nla_tracks):
-        arm.animation_data.nla_tracks.remove(track)
-    arm.animation_data.action = bpy.data.actions["Run"]
+    play("Run")
     drive(fox, "location", 0, "-3.0 + 0.35 * frame")
     cam, aim = camera((0.5, -4.5, 1.2), (-2.6, 1.0, 0.4), 35)
     drive(aim, "location", 0, "-2.6 + 0.35 * frame")

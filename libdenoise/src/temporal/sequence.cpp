@@ -239,6 +239,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   if (share > 0.0) makePastHistories(n, read, denoise);
   Filtered self = filtered(n, &frame, read, denoise);
   lastStats_ = self.result.stats;
+  lastWithoutMotion_ = inputs_.at(n)->frame.motion.empty();
   WithCompanions out{*self.alone, {}};
   DenoiseResult& result = out.result;
   result.color = std::move(self.result.color);
@@ -284,6 +285,12 @@ std::string Sequence::report() const {
     out += line;
   }
   return out;
+}
+
+std::string Sequence::missingMotion() const {
+  return lastWithoutMotion_ ? "no motion vectors in this frame (Blender: the Vector pass, motion "
+                              "blur off): denoised alone, and its neighbours' chains stop at it"
+                            : std::string();
 }
 
 }  // namespace dn::temporal

@@ -82,6 +82,9 @@ class Sequence {
   int lastFrame() const { return lastNumber_; }
   // The same in one line: "frame N: 40% from history (4 neighbours...)".
   std::string report() const;
+  // Why the last frame had no neighbours, in one line, where it had no motion
+  // vectors (denoised alone, and its neighbours' chains stop at it); else empty.
+  std::string missingMotion() const;
 
  private:
   struct Input;
@@ -120,6 +123,7 @@ class Sequence {
   std::map<int, std::shared_ptr<const DenoiseResult>> estimates_;
   TemporalStats lastStats_;
   int lastNumber_ = 0;
+  bool lastWithoutMotion_ = false;
 };
 
 }  // namespace dn::temporal

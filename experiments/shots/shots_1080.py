@@ -1,0 +1,410 @@
+"""The production-scale shots: fourteen Blender 5 scenes framed for 1920x1080 and
+rendered as a square crop of that frame where the action is, so that every pixel is
+a 1080p pixel and the Vector pass is in 1080p pixels (issue 52).
+
+Run under a Python with the bpy module (PyPI bpy 5), one shot a call:
+  /work/venv-bpy/bin/python experiments/shots/shots_1080.py --shot helmet_slide --out DATA/shots_1080/helmet_slide
+  ... --list                                   (the shots, their crops and settings)
+  ... --preview DIR                            (the whole 1080p frame 4, small, the crop outlined)
+build_set.py --set production runs every shot; README.md says what each covers,
+SPLIT_1080.md which half it belongs to.
+
+Writes, as shots.py does (half-float multilayer EXR, the same passes, the noise
+seed animated): DIR/spp<N>.<frame>.exr for frames 1-8; references only for the
+scored frames (REF_FRAMES), two of different seeds each, DIR/ref.<frame>.exr and
+DIR/ref2.<frame>.exr (a shot where nothing moves: one DIR/ref.exr and DIR/ref2.exr).
+experiments/temporal_eval.py scores the frames that have references and, with
+--ref-noise pair, takes the references' own noise, estimated from the pair, out of PSNR.
+
+The scene-building helpers are shots.py's.
+"""
+
+import argparse
+import math
+import os
+import sys
+import time
+
+import bpy
+from bpy_extras.object_utils import world_to_camera_view
+from mathutils import Euler, Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from shots import (box, camera, configure, cylinder, drive, handheld, light, material, model,  # noqa: E402
+                   play, render, script_argv, sphere, world_colour, world_hdri, NOISY_SEED, REF_SEED,
+                   CHECK_SEED)
+
+FULL = (1920, 1080)    # the frame the shots are framed for
+CROP = 192             # the rendered square, in pixels of that frame
+REF_FRAMES = (3, 4, 7, 8)  # the scored frames: two consecutive pairs, for flicker
+FOCUS_FRAME = 4        # the crop is centred on the focus point as seen on this frame
+
+# name: (reference spp, whether anything moves). Rule, from the 96x96 probe
+# (measure.py --set production, README.md): 384 spp for every moving shot (8
+# references each: what the 1.5 hours allow), 1024 for a still one (one pair
+# serves all 8 frames); the scoring takes the references' own noise out of PSNR.
+SHOTS = {
+    "bottle_turn":   (384, True),
+    "helmet_slide":  (384, True),
+    "fox_survey":    (384, True),
+    "fox_trot":      (384, True),
+    "toycar_arc":    (384, True),
+    "truck_close":   (384, True),
+    "pergola_sweep": (384, True),
+    "sign_swing":    (384, True),
+    "lamp_dimmer":   (384, True),
+    "torch_sweep":   (384, True),
+    "kitchen_dolly": (384, True),
+    "shelf_track":   (384, True),
+    "still_lounge":  (1024, False),
+    "still_studio":  (1024, False),
+}
+
+
+def parse_args():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--shot", choices=sorted(SHOTS))
+    p.add_argument("--out")
+    p.add_argument("--crop", type=int, default=CROP)
+    p.add_argument("--frames", default="1-8", help="FIRST-LAST")
+    p.add_argument("--spp", type=int, nargs="*", default=[4, 16])
+    p.add_argument("--ref-spp", type=int, default=-1, help="default: the shot's; 0: no references")
+    p.add_argument("--ref-frames", default=",".join(map(str, REF_FRAMES)), help="frames with references")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--preview", default="", help="write DIR/<shot>.png: frame 4 whole (480x270, 16 spp), crop outlined")
+    p.add_argument("--list", action="store_true")
+    return p.parse_args(script_argv())
+
+
+def on(obj, offset=(0, 0, 0)):
+    """A focus point carried by an object: its origin plus offset (world axes)."""
+    return lambda: obj.matrix_world.translation + Vector(offset)
+
+
+def sun_direction(sun):
+    return Euler(sun.rotation_euler).to_matrix() @ Vector((0, 0, -1))
+
+
+def shadow_on_plane(point, sun, plane_y):
+    """Where the sun's ray through `point` meets the plane y = plane_y (a wall)."""
+    d = sun_direction(sun)
+    return Vector(point) + d * ((plane_y - point[1]) / d[1])
+
+
+# ---------------------------------------------------------------- the shots
+# Each builds its scene and returns its focus: a world point, or a function giving
+# one (for something that moves), evaluated on FOCUS_FRAME.
+
+def bottle_turn():
+    """A brushed-steel bottle with a painted label sliding and turning on a stone
+    counter (interior HDRI, a sun through an unseen window): glossy reflections moving."""
+    world_hdri("interior", 1.0, 0.8)
+    light("SUN", "sun", (0, 0, 10), 2.0, 2.0, (math.radians(50), 0, math.radians(60)))
+    box("counter", (0, 0.1, -0.03), (2.0, 0.8, 0.06), material("stone", (0.7, 0.68, 0.64), 0.25, "noise", 25.0))
+    box("splashback", (0, 0.5, 0.4), (2.0, 0.04, 0.8), material("tiles", (0.8, 0.82, 0.85), 0.2, "brick", 10.0))
+    steel = material("steel", (0.85, 0.85, 0.87), 0.18, metallic=1.0)
+    bottle = bpy.data.objects.new("bottle", None)
+    bpy.context.scene.collection.objects.link(bottle)
+    parts = [cylinder("body", (0, 0, 0.1), 0.035, 0.2, steel),
+             cylinder("label", (0, 0, 0.09), 0.0356, 0.08, material("paint", (0.7, 0.12, 0.08), 0.3, "checker", 30.0)),
+             sphere("shoulder", (0, 0, 0.2), 0.035, steel),
+             cylinder("neck", (0, 0, 0.245), 0.014, 0.05, steel),
+             cylinder("cap", (0, 0, 0.275), 0.016, 0.02, material("cap", (0.05, 0.05, 0.05), 0.4))]
+    for part in parts:
+        part.parent = bottle
+    drive(bottle, "location", 0, "-0.03 + 0.006 * frame")
+    drive(bottle, "rotation_euler", 2, "0.12 * frame")
+    sphere("apple", (0.14, 0.12, 0.04), 0.04, material("apple", (0.6, 0.08, 0.05), 0.35, "noise", 12.0))
+    camera((0.05, -0.65, 0.25), (0.0, 0.0, 0.14), 50)
+    return on(bottle, (0, -0.03, 0.14))
+
+
+def helmet_slide():
+    """The helmet (metal, visor, fine texture) sliding and turning on a polished
+    table outdoors (courtyard HDRI and sun); a locked-off camera."""
+    world_hdri("courtyard", 1.0, 0.6)
+    light("SUN", "sun", (0, 0, 10), 3.0, 2.0, (math.radians(45), 0, math.radians(30)))
+    box("ground", (0, 0, -0.05), (12, 12, 0.1), material("paving", (0.55, 0.5, 0.45), 0.7, "brick", 4.0))
+    box("table", (0, 0, 0.73), (1.6, 0.9, 0.04), material("lacquer", (0.25, 0.14, 0.08), 0.12, "wood", 6.0))
+    helmet = model("DamagedHelmet", 0.45, (-0.1, 0, 0.75), 0.2)
+    drive(helmet, "location", 0, "-0.1 + 0.006 * frame")
+    drive(helmet, "rotation_euler", 2, "0.2 + 0.03 * frame")
+    camera((0.3, -1.7, 1.2), (0.0, 0.0, 0.95), 50)
+    return on(helmet, (0.0, -0.1, 0.25))
+
+
+def fox_survey():
+    """The Fox (skinned) looking about (its Survey clip) on a rug on a veranda
+    (forest HDRI and sun); the camera pushes in slowly."""
+    world_hdri("forest", 1.0, 1.5)
+    light("SUN", "sun", (0, 0, 10), 3.0, 1.0, (math.radians(50), 0, math.radians(-50)))
+    box("boards", (0, 1, -0.05), (8, 6, 0.1), material("boards", (0.5, 0.38, 0.26), 0.5, "wood", 5.0))
+    box("wall", (0, 3.0, 1.3), (8, 0.2, 2.6), material("render", (0.8, 0.76, 0.68), 0.9, "noise", 20.0))
+    box("rug", (0, 1.2, 0.005), (2.0, 1.4, 0.01), material("rug", (0.55, 0.2, 0.12), 0.9, "noise", 40.0))
+    fox = model("Fox", 1.0, (0, 1.2, 0.01), -2.0)
+    play("Survey")
+    model("SheenChair", 0.9, (1.3, 2.2, 0), -2.6)
+    cam, aim = camera((0.6, -1.6, 0.9), (0.0, 1.2, 0.4), 50)
+    drive(cam, "location", 1, "-1.6 + 0.03 * frame")
+    return on(fox, (0.0, 0.0, 0.5))
+
+
+def fox_trot():
+    """The Fox walking diagonally towards a locked-off camera across a lawn (city
+    HDRI, low sun): a deforming animal, disocclusion, a moving shadow."""
+    world_hdri("city", 0.7, 2.8)
+    light("SUN", "sun", (0, 0, 10), 2.5, 1.0, (math.radians(65), 0, math.radians(-120)))
+    box("lawn", (0, 2, -0.05), (20, 14, 0.1), material("grass", (0.2, 0.32, 0.1), 0.9, "noise", 90.0))
+    box("hedge", (0, 5.5, 0.6), (20, 0.8, 1.2), material("hedge", (0.1, 0.22, 0.06), 0.9, "noise", 30.0))
+    fox = model("Fox", 1.0, (-0.9, 2.6, 0), -2.4)
+    play("Walk")
+    drive(fox, "location", 0, "-0.9 + 0.055 * frame")  # about its walking pace, along its heading
+    drive(fox, "location", 1, "2.6 - 0.06 * frame")
+    camera((0.4, -1.8, 1.0), (-0.3, 2.4, 0.35), 50)
+    return on(fox, (0.0, 0.0, 0.45))
+
+
+def toycar_arc():
+    """The toy car (clearcoat, chrome, glass) driving an arc on glossy tiles under
+    a city sky (city HDRI, sun); a locked-off camera."""
+    world_hdri("city", 1.0, 1.0)
+    light("SUN", "sun", (0, 0, 10), 4.0, 1.0, (math.radians(40), 0, math.radians(70)))
+    box("floor", (0, 0, -0.05), (8, 8, 0.1), material("tiles", (0.55, 0.5, 0.45), 0.3, "checker", 40.0))
+    car = model("ToyCar", 0.3, (0, 0, 0), 0.0, drop=("Fabric",))
+    drive(car, "location", 0, "0.5 * sin(0.07 * frame) - 0.15")
+    drive(car, "location", 1, "0.5 * (1 - cos(0.07 * frame)) - 0.1")
+    drive(car, "rotation_euler", 2, "0.07 * frame")
+    camera((0.1, -0.9, 0.35), (0.0, 0.1, 0.05), 50)
+    return on(car, (0, 0, 0.05))
+
+
+def truck_close():
+    """The milk truck driving slowly past on a wet, glossy road in a city (city
+    HDRI, sun); a locked-off camera, the cab's reflections crossing the frame."""
+    world_hdri("city", 1.0, 1.2)
+    light("SUN", "sun", (0, 0, 10), 2.5, 1.0, (math.radians(55), 0, math.radians(-30)))
+    box("road", (0, 0, -0.05), (40, 8, 0.1), material("wet", (0.08, 0.08, 0.09), 0.08, "noise", 20.0))
+    box("kerb", (0, 4.2, 0.08), (40, 0.4, 0.16), material("kerb", (0.6, 0.6, 0.58), 0.6, "brick", 10.0))
+    box("wall", (0, 6.0, 1.5), (40, 0.3, 3.0), material("bricks", (0.55, 0.3, 0.22), 0.8, "brick", 5.0))
+    truck = model("CesiumMilkTruck", 4.5, (-1.5, 0.5, 0), 0.0)
+    drive(truck, "location", 0, "-1.5 + 0.12 * frame")
+    camera((1.5, -6.5, 1.4), (0.0, 0.5, 1.0), 50)
+    return on(truck, (1.4, -1.0, 1.2))
+
+
+def pergola_sweep():
+    """Slatted pergola shade sweeping over a deck, a wall and a chair as the sun
+    moves (a time lapse; sunrise HDRI); a locked-off camera, nothing else moves."""
+    world_hdri("sunrise", 0.6, 0.5)
+    sun = light("SUN", "sun", (0, 0, 10), 4.0, 0.8)
+    drive(sun, "rotation_euler", 0, "0.55 + 0.01 * frame")
+    drive(sun, "rotation_euler", 2, "-0.6 + 0.05 * frame")
+    box("deck", (0, 1, -0.05), (8, 6, 0.1), material("deck", (0.5, 0.4, 0.3), 0.45, "wood", 4.0))
+    box("wall", (0, 2.6, 1.3), (8, 0.2, 2.6), material("bricks", (0.6, 0.42, 0.32), 0.8, "brick", 4.0))
+    slat = material("slat", (0.55, 0.5, 0.45), 0.6)
+    for i in range(14):
+        box("slat%d" % i, (-1.95 + 0.3 * i, 1.3, 2.5), (0.06, 2.6, 0.12), slat)
+    model("SheenChair", 0.9, (-0.4, 1.8, 0), 0.3)
+    camera((0.9, -1.8, 1.5), (0.0, 2.0, 0.8), 35)
+    return Vector((0.0, 2.5, 1.0))
+
+
+def sign_swing():
+    """A hanging shop sign swinging in the sun before a brick wall: its shadow sweeps
+    over the wall's bricks (courtyard HDRI, sun); a locked-off camera."""
+    world_hdri("courtyard", 0.6, 2.0)
+    sun = light("SUN", "sun", (0, 0, 10), 3.0, 0.5, (math.radians(50), 0, math.radians(60)))
+    box("wall", (0, 0.1, 1.5), (8, 0.2, 3.0), material("bricks", (0.6, 0.32, 0.24), 0.85, "brick", 5.0))
+    box("pavement", (0, -1.5, -0.05), (8, 3, 0.1), material("flags", (0.5, 0.5, 0.48), 0.7, "brick", 2.0))
+    box("arm", (0.0, -0.35, 2.55), (0.03, 0.7, 0.03), material("iron", (0.1, 0.1, 0.1), 0.4, metallic=1.0))
+    pivot = bpy.data.objects.new("pivot", None)
+    bpy.context.scene.collection.objects.link(pivot)
+    pivot.location = (0.0, -0.4, 2.53)
+    board = box("sign", (0.0, -0.4, 2.25), (0.03, 0.55, 0.45), material("sign", (0.2, 0.35, 0.25), 0.5, "wood", 8.0))
+    board.parent = pivot
+    board.location = (0.0, 0.0, -0.28)
+    drive(pivot, "rotation_euler", 1, "0.35 * sin(0.6 * frame)")
+    camera((1.2, -4.0, 1.7), (-0.3, 0.0, 2.0), 50)
+    bpy.context.view_layer.update()
+    return shadow_on_plane((0.0, -0.4, 2.25), sun, 0.0)
+
+
+def lamp_dimmer():
+    """A locked-off room at dusk: a table lamp brightening and warming (a dimmer)
+    over a vase and a chair; nothing moves, only the light changes."""
+    world_hdri("night", 0.5, 0.0)
+    box("floor", (0, 1, -0.05), (6, 6, 0.1), material("floor", (0.45, 0.38, 0.3), 0.4, "wood", 4.0))
+    box("wall", (0, 2.2, 1.4), (6, 0.2, 2.8), material("paper", (0.7, 0.66, 0.58), 0.9, "noise", 15.0))
+    box("table", (0, 1.4, 0.375), (1.0, 0.7, 0.75), material("table", (0.3, 0.2, 0.12), 0.3, "wood", 6.0))
+    model("GlassVaseFlowers", 0.4, (-0.15, 1.4, 0.75), 0.0)
+    model("SheenChair", 0.85, (0.9, 1.1, 0), -0.4)
+    lamp = light("POINT", "lamp", (0.3, 1.6, 1.15), 8.0, 0.08, colour=(1.0, 0.9, 0.8))
+    drive(lamp.data, "energy", -1, "8.0 + 5.0 * frame")
+    drive(lamp.data, "color", 2, "0.8 - 0.05 * frame")
+    light("AREA", "window", (-2.5, 0.5, 1.5), 20.0, 1.5, (0, math.radians(-90), 0), (0.5, 0.6, 1.0))
+    camera((-0.5, -1.4, 1.35), (0.0, 1.4, 0.9), 50)
+    return Vector((-0.1, 1.4, 0.95))
+
+
+def torch_sweep():
+    """A dark room at night, a torch beam sweeping across a sofa, a chair and a
+    textured wall (a moving light indoors); a locked-off camera."""
+    world_colour((0.01, 0.012, 0.03), 1.0)
+    box("floor", (0, 1.5, -0.05), (7, 6, 0.1), material("floor", (0.45, 0.4, 0.35), 0.5, "checker", 8.0))
+    box("wall", (0, 3.6, 1.4), (7, 0.2, 2.8), material("bricks", (0.6, 0.45, 0.35), 0.85, "brick", 5.0))
+    box("side", (-2.6, 1.5, 1.4), (0.2, 6, 2.8), material("plaster", (0.7, 0.68, 0.62), 0.9))
+    model("GlamVelvetSofa", 2.0, (-0.6, 3.0, 0), 0.0)
+    model("SheenChair", 0.85, (1.2, 2.3, 0), -0.5)
+    torch = light("SPOT", "torch", (0.8, -0.6, 1.5), 10000.0, 0.03, (math.radians(70), 0, 0.0), (1.0, 0.95, 0.85))
+    torch.data.spot_size = math.radians(30)
+    torch.data.spot_blend = 0.3
+    drive(torch, "rotation_euler", 2, "0.55 - 0.1 * frame")
+    light("POINT", "hall", (2.5, 0.0, 2.2), 600.0, 0.1, colour=(0.6, 0.7, 1.0))  # a dim fill from a doorway
+    camera((0.2, -1.2, 1.3), (-0.3, 3.0, 0.7), 35)
+    return Vector((-0.2, 2.9, 0.6))
+
+
+def kitchen_dolly():
+    """A kitchen counter with a chrome kettle, glass tumblers and a bowl (interior
+    HDRI, sun through an unseen window); the camera dollies along it."""
+    world_hdri("interior", 1.0, 2.4)
+    light("SUN", "sun", (0, 0, 10), 2.5, 1.5, (math.radians(45), 0, math.radians(-70)))
+    box("counter", (0, 0.2, 0.44), (3.0, 0.7, 0.04), material("granite", (0.2, 0.2, 0.22), 0.2, "noise", 50.0))
+    box("cabinet", (0, 0.2, 0.21), (3.0, 0.66, 0.42), material("oak", (0.5, 0.35, 0.2), 0.4, "wood", 5.0))
+    box("tiles", (0, 0.57, 0.8), (3.0, 0.04, 0.7), material("tiles", (0.85, 0.85, 0.8), 0.15, "brick", 16.0))
+    chrome = material("chrome", (0.92, 0.92, 0.92), 0.05, metallic=1.0)
+    kettle = sphere("kettle", (-0.1, 0.3, 0.56), 0.1, chrome)
+    kettle.scale = (1, 1, 0.9)
+    cylinder("lid", (-0.1, 0.3, 0.66), 0.04, 0.03, material("black", (0.03, 0.03, 0.03), 0.3))
+    glass = material("glass", (1, 1, 1), 0.0, transmission=1.0)
+    for i, x in enumerate((0.15, 0.28, 0.4)):
+        cylinder("tumbler%d" % i, (x, 0.15, 0.51), 0.035, 0.1, glass)
+    sphere("bowl", (-0.4, 0.2, 0.48), 0.09, material("bowl", (0.85, 0.8, 0.7), 0.1)).scale = (1, 1, 0.4)
+    cam, aim = camera((-0.45, -0.55, 0.8), (0.05, 0.25, 0.55), 50)
+    drive(cam, "location", 0, "-0.45 + 0.02 * frame")
+    drive(aim, "location", 0, "0.05 + 0.01 * frame")
+    return Vector((0.15, 0.15, 0.53))
+
+
+def shelf_track():
+    """The camera trucking past a shelf of glass and chrome: spheres, the glass vase
+    (studio HDRI, softbox): refraction and reflection moving with parallax."""
+    world_hdri("studio", 1.0, 1.8)
+    light("AREA", "softbox", (1.0, -1.5, 2.0), 120.0, 1.2, (math.radians(50), 0, math.radians(35)))
+    box("backdrop", (0, 0.6, 1.0), (4, 0.05, 2.0), material("backdrop", (0.35, 0.4, 0.45), 0.7, "noise", 8.0))
+    box("shelf", (0, 0.3, 0.78), (2.4, 0.4, 0.04), material("walnut", (0.35, 0.22, 0.12), 0.3, "wood", 8.0))
+    glass = material("glass", (1, 1, 1), 0.0, transmission=1.0)
+    chrome = material("chrome", (0.9, 0.9, 0.9), 0.06, metallic=1.0)
+    for i, x in enumerate((-0.5, -0.2, 0.25, 0.55)):
+        sphere("ball%d" % i, (x, 0.28 + 0.06 * (i % 2), 0.8 + 0.07), 0.07, glass if i % 2 == 0 else chrome)
+    model("GlassVaseFlowers", 0.4, (0.05, 0.3, 0.8), 0.5)
+    cam, aim = camera((-0.25, -0.9, 1.0), (-0.25, 0.3, 0.9), 50)
+    drive(cam, "location", 0, "-0.25 + 0.012 * frame")
+    drive(aim, "location", 0, "-0.25 + 0.012 * frame")
+    return Vector((-0.1, 0.3, 0.92))
+
+
+def still_lounge():
+    """A locked-off lounge: the velvet sofa and the sheen chair on a rug by a window
+    (interior HDRI, an area light as the window); nothing moves."""
+    world_hdri("interior", 0.8, 0.3)
+    box("floor", (0, 1, -0.05), (7, 6, 0.1), material("parquet", (0.5, 0.35, 0.22), 0.35, "brick", 6.0))
+    box("wall", (0, 3.2, 1.4), (7, 0.2, 2.8), material("paint", (0.72, 0.7, 0.66), 0.9, "noise", 12.0))
+    box("rug", (0, 2.0, 0.005), (2.6, 1.8, 0.01), material("rug", (0.3, 0.35, 0.5), 0.9, "noise", 60.0))
+    model("GlamVelvetSofa", 2.0, (-0.3, 2.6, 0), 0.0)
+    model("SheenChair", 0.85, (1.1, 1.7, 0), -0.7)
+    light("AREA", "window", (2.8, 1.5, 1.6), 300.0, 1.8, (0, math.radians(90), 0), (1.0, 0.95, 0.88))
+    camera((1.4, -1.2, 1.2), (0.2, 2.2, 0.5), 50)
+    return Vector((0.6, 2.1, 0.55))
+
+
+def still_studio():
+    """A locked-off studio still life: the helmet, a chrome and a glass sphere on a
+    grey sweep (studio HDRI, softbox); nothing moves."""
+    world_hdri("studio", 1.0, 0.0)
+    light("AREA", "softbox", (1.5, -1.5, 2.5), 150.0, 1.2, (math.radians(45), 0, math.radians(45)))
+    box("sweep", (0, 0, -0.05), (8, 8, 0.1), material("grey", (0.5, 0.5, 0.5), 0.6))
+    model("DamagedHelmet", 0.4, (0.0, 0.2, 0.0), -0.4)
+    sphere("chrome", (0.32, -0.05, 0.1), 0.1, material("chrome", (0.9, 0.9, 0.9), 0.08, metallic=1.0))
+    sphere("glass", (-0.3, -0.1, 0.12), 0.12, material("glass", (1, 1, 1), 0.0, transmission=1.0))
+    camera((0.2, -1.6, 0.6), (0.05, 0.1, 0.18), 50)
+    return Vector((0.12, 0.0, 0.18))
+
+
+# ---------------------------------------------------------------- framing and rendering
+
+def crop_to(scene, focus, size):
+    """Border-render a size x size square of the 1080p frame centred on where the focus
+    is seen on FOCUS_FRAME (clamped inside the frame); returns its pixel rectangle."""
+    scene.frame_set(FOCUS_FRAME)
+    point = focus() if callable(focus) else focus
+    view = world_to_camera_view(scene, scene.camera, point)
+    width, height = FULL
+    x0 = min(max(round(view.x * width - size / 2), 0), width - size)
+    y0 = min(max(round(view.y * height - size / 2), 0), height - size)  # from the bottom, as Blender counts
+    render = scene.render
+    render.use_border, render.use_crop_to_border = True, True
+    render.border_min_x, render.border_max_x = x0 / width, (x0 + size) / width
+    render.border_min_y, render.border_max_y = y0 / height, (y0 + size) / height
+    return x0, y0
+
+
+def preview(scene, shot, folder, x0, y0, size):
+    """Frame FOCUS_FRAME whole at 480x270, 16 spp, the crop outlined in red (PNG)."""
+    import numpy as np
+    scene.render.use_border = False
+    scene.render.resolution_percentage = 25
+    scene.cycles.samples = 16
+    settings = scene.render.image_settings
+    settings.media_type, settings.file_format = "IMAGE", "PNG"
+    scene.view_settings.view_transform = "AgX"  # what a user looks at
+    path = os.path.join(folder, shot + ".png")
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    w, h = img.size
+    px = np.array(img.pixels[:]).reshape(h, w, 4)
+    a, b, c, d = (int(v / 4) for v in (x0, x0 + size, y0, y0 + size))
+    px[c:d, [a, min(b, w - 1)]] = (1, 0, 0, 1)
+    px[[c, min(d, h - 1)], a:b] = (1, 0, 0, 1)
+    img.pixels[:] = px.ravel()
+    img.save()
+
+
+def main():
+    args = parse_args()
+    if args.list:  # name, frame size, reference spp, moving or still, reference frames, description
+        for name, (ref_spp, moving) in SHOTS.items():
+            print(name, "%dx%d" % (args.crop, args.crop), ref_spp, "moving" if moving else "still",
+                  args.ref_frames if moving else "all", "-", " ".join(globals()[name].__doc__.split()))
+        return
+    ref_spp, moving = SHOTS[args.shot]
+    ref_spp = ref_spp if args.ref_spp < 0 else args.ref_spp
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj, do_unlink=True)
+    scene = bpy.context.scene
+    configure(scene, "%dx%d" % FULL, args.threads)
+    start = time.time()
+    focus = globals()[args.shot]()
+    x0, y0 = crop_to(scene, focus, args.crop)
+    print("shots_1080: %s built in %.1f s, crop %dx%d at x %d, y %d (from the bottom) of %dx%d"
+          % (args.shot, time.time() - start, args.crop, args.crop, x0, y0, *FULL), flush=True)
+    if args.preview:
+        os.makedirs(args.preview, exist_ok=True)
+        return preview(scene, args.shot, args.preview, x0, y0, args.crop)
+    first, last = (int(v) for v in args.frames.split("-"))
+    scene.frame_start, scene.frame_end = first, last
+    ref_frames = {int(f) for f in args.ref_frames.split(",") if f}
+    os.makedirs(args.out, exist_ok=True)
+    for frame in range(first, last + 1):
+        scene.frame_set(frame)
+        for spp in args.spp:
+            render(scene, os.path.join(args.out, "spp%d.%04d.exr" % (spp, frame)), spp, NOISY_SEED * spp)
+        if ref_spp > 0 and (frame in ref_frames if moving else frame == first):
+            suffix = ".%04d.exr" % frame if moving else ".exr"
+            render(scene, os.path.join(args.out, "ref" + suffix), ref_spp, REF_SEED)
+            render(scene, os.path.join(args.out, "ref2" + suffix), ref_spp, CHECK_SEED)
+
+
+if __name__ == "__main__":
+    main()
