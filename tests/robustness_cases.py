@@ -65,7 +65,7 @@ CASES = [
     Case("--light-paths maybe", D + " --light-paths maybe {frame} -o {w}/x.exr", 1,
          "--light-paths must be on or off", absent=("{w}/x.exr",)),
     Case("--precision half", S + " --precision half {frame} -o {w}/x.exr", 1,
-         "--precision must be float or bf16", absent=("{w}/x.exr",)),
+         "--precision must be float, bf16 or fp16", absent=("{w}/x.exr",)),
     Case("--precision with the from-scratch model", D + " --precision bf16 {frame} -o {w}/x.exr", 1,
          "--precision applies only to models over OIDN's networks", absent=("{w}/x.exr",)),
     Case("--eta 2", D + " --eta 2 {frame} -o {w}/x.exr", 1, "--eta must be between 0 and 1"),

@@ -133,39 +133,48 @@ torch::Tensor controlHint(const OidnControlConfig& config, const torch::Tensor& 
   return config.diffusion ? withDiffusionState(hint, state, sigma) : hint;
 }
 
-std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
-                                                    const OidnControlConfig& config,
-                                                    const TileRect& r) {
+namespace {
+
+// The extra buffers in the config's order, stacked (`present(image)` gives a
+// buffer the frame has, zeros of its channel count stand in for one it
+// lacks), and which are present, on `options`' device.
+template <class Present>
+std::pair<torch::Tensor, torch::Tensor> stackExtras(const FrameBuffers& frame,
+                                                    const OidnControlConfig& config, int64_t height,
+                                                    int64_t width,
+                                                    const torch::TensorOptions& options,
+                                                    const Present& present) {
   std::vector<torch::Tensor> parts;
   std::vector<float> flags;
   for (const auto& name : config.extra_buffers) {
     const int64_t channels = findBufferSpec(name)->channels;
     const bool has = frame.has(name);
     flags.push_back(has ? 1.0f : 0.0f);
-    parts.push_back(has ? imageRegionToTensor(frame.get(name), r.y0, r.x0, r.height, r.width)
-                        : torch::zeros({1, channels, r.height, r.width}));
+    parts.push_back(has ? present(frame.get(name))
+                        : torch::zeros({1, channels, height, width}, options));
   }
   torch::Tensor extras =
-      parts.empty() ? torch::zeros({1, 0, r.height, r.width}) : torch::cat(parts, 1);
-  return {extras, torch::tensor(flags).view({1, -1})};
+      parts.empty() ? torch::zeros({1, 0, height, width}, options) : torch::cat(parts, 1);
+  return {extras, torch::tensor(flags).view({1, -1}).to(options.device())};
+}
+
+}  // namespace
+
+std::pair<torch::Tensor, torch::Tensor> frameExtras(const FrameBuffers& frame,
+                                                    const OidnControlConfig& config,
+                                                    const TileRect& r) {
+  return stackExtras(frame, config, r.height, r.width, torch::TensorOptions(),
+                     [&](const Image& image) {
+                       return imageRegionToTensor(image, r.y0, r.x0, r.height, r.width);
+                     });
 }
 
 std::pair<torch::Tensor, torch::Tensor> frameExtrasOnDevice(const FrameBuffers& frame,
                                                             const OidnControlConfig& config,
                                                             torch::Device device) {
-  const auto floats = torch::TensorOptions().dtype(torch::kFloat).device(device);
-  std::vector<torch::Tensor> parts;
-  std::vector<float> flags;
-  for (const auto& name : config.extra_buffers) {
-    const int64_t channels = findBufferSpec(name)->channels;
-    const bool has = frame.has(name);
-    flags.push_back(has ? 1.0f : 0.0f);
-    parts.push_back(has ? imageToDevice(frame.get(name), device)
-                        : torch::zeros({1, channels, frame.height, frame.width}, floats));
-  }
-  torch::Tensor extras = parts.empty() ? torch::zeros({1, 0, frame.height, frame.width}, floats)
-                                       : torch::cat(parts, 1);
-  return {extras, torch::tensor(flags).view({1, -1}).to(device)};
+  return stackExtras(frame, config, frame.height, frame.width,
+                     torch::TensorOptions().dtype(torch::kFloat).device(device),
+                     [&](const Image& image) { return imageToDevice(image, device); });
 }
 
 }  // namespace dn
