@@ -180,6 +180,7 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
     forget(m);  // its window only, so memory stays bounded at a run's start too
     Filtered earlier = filtered(m, nullptr, read, denoise);
     if (!earlier.alone) continue;
+    earlier.result.weights = FilterWeights();  // only the passes of the frames asked for use them
     denoisedHistory(m, read(fileOf(m)), earlier.result, denoise);
   }
 }
@@ -241,6 +242,10 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   lastStats_ = self.result.stats;
   lastWithoutMotion_ = inputs_.at(n)->frame.motion.empty();
   WithCompanions out{*self.alone, {}};
+  // The passes first, so that the neighbours' taps and weights are gone
+  // before the history's network run (about 21 bytes a pixel a neighbour).
+  if (make) out.companions = filteredCompanions(n, frame, self.result.weights, read, make);
+  self.result.weights = FilterWeights();
   DenoiseResult& result = out.result;
   result.color = std::move(self.result.color);
   if (share > 0.0) {
@@ -248,7 +253,6 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
     result.color =
         blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
   }
-  if (make) out.companions = filteredCompanions(n, frame, self.result.weights, read, make);
   return out;
 }
 
