@@ -95,7 +95,9 @@ finish() {
   file="$out/results/$(date +%F)-$gpu.txt"
   {
     echo "# bash bench/gpu/check_cuda.sh on $gpu, $(date -u '+%F %T') UTC, $(nproc) cores, device $device"
-    echo "# commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), torch ${torch_version:-?}"
+    # The device machine's copy of .git can be older than the tree it ran:
+    # prepare_carry.sh notes the commit the carry was made from.
+    echo "# commit $(cat "$carry/commit" 2>/dev/null || git rev-parse --short HEAD 2>/dev/null || echo unknown), torch ${torch_version:-?}"
     cat "$results"
     python3 bench/gpu/summarize.py "$results" | sed 's/^/# /'
   } >"$file" || fail "results file"

@@ -74,6 +74,9 @@ if [ -n "$cuda_build" ]; then
   sed -n "s/^__version__ = '\(.*\)'$/\1/p" "$torch_dir/../../../version.py" >"$carry/build/torch_version"
 fi
 
+# The commit the carry was made from, for the results file (a "+" when the tree had changes).
+echo "$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . ':!bench/gpu/carry' || echo +)" >"$carry/commit"
+
 # What the device tool sends: tracked and untracked-not-ignored files, plus the carry.
 tree=$( (git ls-files -z; git ls-files -z --others --exclude-standard) | xargs -0 du -cb 2>/dev/null | tail -1 | cut -f1)
 extra=$(du -sb "$carry" | cut -f1)
