@@ -78,7 +78,7 @@ int run(Options o, int argc, char** argv) {
   // The passes run the networks the denoiser already loaded.
   const OidnBase passBase = o.passes ? denoiser.oidnBase() : OidnBase(nullptr);
   if (o.passes) requirePrefilterNetworks(passBase, o.model);
-  const auto sequence = planSequence(o, jobs);
+  const auto sequence = planSequence(o, jobs, denoiser);
   // On a sequence the light passes are filtered with the beauty's weights.
   const bool passesOverTime = sequence && o.passes && o.passesOverTime != PassesOverTime::Off;
   const temporal::Sequence::Read readFile = [&](const std::string& path) {

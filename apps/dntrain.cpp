@@ -3,6 +3,7 @@
 //   dntrain control --data DIR --base base.dnm --out model.dnm  train the Control Module
 //   dntrain regression --data DIR --base base.dnm --out reg.dnm the single-pass ablation
 //   dntrain defaults --model M --respacing 27 --default-skip 18 --default-spp 4 ...  tuned defaults
+//   dntrain trust --data DIR --out trust.txt    the temporal filter's learned trust
 #include <fmt/format.h>
 #include <torch/torch.h>
 #include <torch/version.h>
@@ -17,6 +18,8 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <set>
+#include <sstream>
 #include <thread>
 
 #include "common/app.h"
@@ -36,6 +39,7 @@
 #include "dn/train/distributed.h"
 #include "dn/train/trainer.h"
 #include "dn/train/training_data.h"
+#include "dn/train/trust_trainer.h"
 
 namespace fs = std::filesystem;
 using namespace dn;
@@ -48,7 +52,9 @@ const char* kUsage =
        dntrain control --data DIR --base base.dnm|--init model.dnm --out model.dnm [options]
        dntrain regression --data DIR --base base.dnm --out reg.dnm [options]
        dntrain defaults --model FILE [--respacing SPEC] [--default-skip S] [--default-spp N]
-                        [--exposure-target Y] [--noise-reference RENDER ...] [--out FILE]
+                        [--exposure-target Y] [--noise-reference RENDER ...]
+                        [--temporal-trust FILE] [--out FILE]
+       dntrain trust   --data DIR[,DIR...] --out trust.txt [--steps N] [--batch N] [--lr X]
        dntrain prior --model model.dnm --out base.dnm
        dntrain rebase --model model.dnm --base oidn.dnm --out model2.dnm
        dntrain import-oidn [--lib PATH] [--variant default|small|large] --out FILE
@@ -68,6 +74,14 @@ regression  the ablation: the same networks (prior + Control Module, initialised
 defaults sets the sampling a model file gives dndenoise when no --steps/--skip
          are passed (after tuning them on a validation split); rewrites --model
          in place unless --out is given. The weights are not touched.
+trust    fits the temporal filter's learned trust (experiments/temporal_trust/)
+         on the animated scenes under each --data (scenegen/animate.py, then
+         experiments/temporal_trust/prepare.py): every scene's dump4/ and
+         dump16/; scenes whose number ends in 4 or 9 are held out to validate.
+         Prints the loss of each frame alone, of the rules that made the dumps
+         and of the fitted trust; writes it as one line (defaults
+         --temporal-trust puts it into a model file). Defaults: --steps 4000
+         --batch 16384 --lr 3e-3.
 rebase   moves the Control Module of a model over the OIDN base onto another
          import of that base (with more networks, e.g. the prefilter mode's):
          the network it steers must hold exactly the same weights.
@@ -124,6 +138,8 @@ options:
                         noise_reference, and dndenoise scales skip and mean
                         matching by each render's measured noise relative to it
   --model FILE          defaults: the model file to change
+  --temporal-trust FILE defaults: the learned trust (dntrain trust's --out) that
+                        dndenoise's temporal filter weighs neighbours by
   --lib PATH            import-oidn: libOpenImageDenoise_core.so.* to read
   --variant NAME        import-oidn: network size, default (0.92 M parameters),
                         small (0.32 M) or large (3.85 M) (default: default)
@@ -149,7 +165,7 @@ std::atomic<bool> stopRequested{false};
 extern "C" void onSignal(int) { stopRequested = true; }
 
 struct Options {
-  std::string mode, data, base, init, out, log, checkpoint, model, respacing, lib;
+  std::string mode, data, base, init, out, log, checkpoint, model, respacing, lib, temporalTrust;
   std::string variant = "default";
   std::vector<std::string> photos, noiseReference;
   std::string aux = "default", prediction = "eps", sigmas = "0.05,0.02";
@@ -162,6 +178,7 @@ struct Options {
   double exposureTarget = -1.0, renderStart = 0.0;
   int64_t maxTimestep = 0;
   double lr = 2e-4, ema = 0.999, checkpointMinutes = 5;
+  std::set<std::string> given;  // of --steps, --batch, --lr: those on the command line
   uint64_t seed = 1;
   int threads = 0;
   bool resume = false;
@@ -227,15 +244,15 @@ Options parseArgs(int argc, char** argv) {
     else if (args.flag("--cache-gb"))
       o.cacheGb = args.intValue("--cache-gb", 1, 1024);
     else if (args.flag("--steps"))
-      o.steps = args.intValue("--steps", 1, INT32_MAX);
+      o.steps = args.intValue("--steps", 1, INT32_MAX), o.given.insert("--steps");
     else if (args.flag("--batch"))
-      o.batch = args.intValue("--batch", 1, 1024);
+      o.batch = args.intValue("--batch", 1, 1 << 20), o.given.insert("--batch");
     else if (args.flag("--crop"))
       o.crop = args.intValue("--crop", 16, 4096);
     else if (args.flag("--spp"))
       o.spp = cli::intList("--spp", args.value("--spp"), 1, 1 << 24);
     else if (args.flag("--lr"))
-      o.lr = args.doubleValue("--lr", 1e-12, 1.0);
+      o.lr = args.doubleValue("--lr", 1e-12, 1.0), o.given.insert("--lr");
     else if (args.flag("--halve-every"))
       o.halveEvery = args.intValue("--halve-every", 0, INT32_MAX);
     else if (args.flag("--ema"))
@@ -264,6 +281,8 @@ Options parseArgs(int argc, char** argv) {
       o.respacing = args.value("--respacing");
     else if (args.flag("--model"))
       o.model = args.value("--model");
+    else if (args.flag("--temporal-trust"))
+      o.temporalTrust = args.value("--temporal-trust");
     else if (args.flag("--lib"))
       o.lib = args.value("--lib");
     else if (args.flag("--variant"))
@@ -298,15 +317,23 @@ Options parseArgs(int argc, char** argv) {
   if (o.mode == "defaults") {
     if (o.model.empty()) throw cli::UsageError("defaults needs --model");
     if (o.respacing.empty() && o.defaultSkip < 0 && o.defaultSpp < 0 && o.exposureTarget == -1.0 &&
-        o.noiseReference.empty())
+        o.noiseReference.empty() && o.temporalTrust.empty())
       throw cli::UsageError(
           "defaults needs one of --respacing, --default-skip, --default-spp, --exposure-target, "
-          "--noise-reference");
+          "--noise-reference, --temporal-trust");
     if (o.exposureTarget != -1.0 && !(o.exposureTarget > 0.0 && o.exposureTarget < 6.0))
       throw cli::UsageError("--exposure-target must be in (0, 6)");
     if (o.out.empty()) o.out = o.model;
     // Only the sampling defaults change: rewriting --model in place is the default.
-    cli::checkFiles(withModel(o.noiseReference, o.model), {{o.out, o.model}}, cli::Inplace::Allow);
+    std::vector<std::string> inputs = withModel(o.noiseReference, o.model);
+    if (!o.temporalTrust.empty()) inputs.push_back(o.temporalTrust);
+    cli::checkFiles(inputs, {{o.out, o.model}}, cli::Inplace::Allow);
+    return o;
+  }
+  if (o.mode == "trust") {
+    if (o.data.empty() || o.out.empty()) throw cli::UsageError("trust needs --data and --out");
+    if (o.batch < 1 || o.steps < 1) throw cli::UsageError("--batch and --steps must be positive");
+    cli::checkFiles({}, {{o.out, "--out"}});
     return o;
   }
   if (o.mode == "prior") {
@@ -331,8 +358,8 @@ Options parseArgs(int argc, char** argv) {
   }
   if (o.mode != "base" && o.mode != "control" && o.mode != "regression")
     throw cli::UsageError(
-        "first argument must be base, control, regression, defaults, prior, rebase or import-oidn "
-        "(see --help)");
+        "first argument must be base, control, regression, defaults, trust, prior, rebase or "
+        "import-oidn (see --help)");
   if (o.out.empty()) throw cli::UsageError("--out is required");
   if (o.mode != "base" && (o.base.empty() == o.init.empty() || o.data.empty()))
     throw cli::UsageError(o.mode + " needs --data and one of --base or --init");
@@ -347,6 +374,7 @@ Options parseArgs(int argc, char** argv) {
     throw cli::UsageError("--max-timestep must be >= 0 and --render-start in [0, 1]");
   if (o.mode == "base" && o.data.empty() && o.photos.empty())
     throw cli::UsageError("base needs --data and/or --photos");
+  if (o.batch > 1024) throw cli::UsageError("--batch must be at most 1024");
   if (o.batch < 1 || o.crop < 16 || o.steps < 1)
     throw cli::UsageError("--batch, --crop and --steps must be positive (crop >= 16)");
   if (o.prediction != "eps" && o.prediction != "v")
@@ -626,9 +654,29 @@ std::string validateControlled(Trainer& trainer, const TrainBatch& val) {
 }
 
 // dntrain defaults: the model's sampling defaults, validated against its schedule.
+// The module holding a loaded model file's weights, whichever its kind.
+const torch::nn::Module& weightsOf(const LoadedModel& loaded) {
+  if (loaded.oidnControlled) return *loaded.oidnControlled;
+  if (loaded.oidn) return *loaded.oidn;
+  return *loaded.model;
+}
+
+// The text of a learned trust file, checked.
+std::string trustText(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  try {
+    return temporal::LearnedTrust::fromText(text.str()).toText();
+  } catch (const std::exception& e) {
+    throw IoError(path + ": not a learned trust (" + e.what() + ")");
+  }
+}
+
 int setDefaults(const Options& o) {
   LoadedModel loaded = loadModelFile(o.model);
   ModelInfo& info = loaded.info;
+  if (!o.temporalTrust.empty()) info.notes["temporal_trust"] = trustText(o.temporalTrust);
   if (!o.respacing.empty()) info.respacing = o.respacing;
   if (o.defaultSkip >= 0) info.notes["default_skip"] = std::to_string(o.defaultSkip);
   if (o.defaultSpp > 0) info.notes["default_spp"] = std::to_string(o.defaultSpp);
@@ -651,7 +699,7 @@ int setDefaults(const Options& o) {
   } catch (const std::exception& e) {
     throw cli::UsageError(std::string("bad sampling defaults: ") + e.what());
   }
-  saveModelFile(o.out, info, *loaded.model);
+  saveModelFile(o.out, info, weightsOf(loaded));
   auto spp = info.notes.find("default_spp");
   auto exposure = info.notes.find("exposure_target");
   auto noise = info.notes.find("noise_reference");
@@ -661,6 +709,70 @@ int setDefaults(const Options& o) {
              o.out, info.respacing, skip, spp == info.notes.end() ? "unknown" : spp->second,
              exposure == info.notes.end() ? "none" : exposure->second,
              noise == info.notes.end() ? "none" : noise->second);
+  return cli::kExitOk;
+}
+
+// `text` into `path` by way of a temporary file: no partial output.
+void writeFileAtomically(const std::string& path, const std::string& text) {
+  const std::string temporary = path + ".tmp";
+  {
+    std::ofstream out(temporary);
+    if (!(out << text) || !out.flush()) throw IoError(path + ": cannot be written");
+  }
+  fs::rename(temporary, path);
+}
+
+// The dump folders of the animated scenes under --data, training or held out.
+std::vector<std::string> trustDumps(const Options& o, bool heldOut) {
+  std::vector<std::string> out;
+  for (const std::string& root : cli::splitList(o.data)) {
+    if (!fs::is_directory(root)) throw IoError(root + ": not a folder");
+    for (const auto& scene : fs::directory_iterator(root)) {
+      const std::string name = scene.path().filename().string();
+      if (name.rfind("scene_", 0) != 0 || !scene.is_directory()) continue;
+      const char last = name.back();
+      if ((last == '4' || last == '9') != heldOut) continue;
+      for (const char* dump : {"dump4", "dump16"})
+        if (fs::is_directory(scene.path() / dump)) out.push_back((scene.path() / dump).string());
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The loss of the frames alone, the dumps' rules and `trust` on `set`.
+std::string trustReport(const TrustSet& set, const temporal::LearnedTrust& trust) {
+  const double alone = trustLoss(set, torch::zeros_like(set.rules));
+  const double rules = trustLoss(set, set.rules);
+  const double learned = trustLoss(set, learnedWeights(set, trust));
+  return fmt::format("{} frames, {} pixels: loss alone {:.6g}, rules {:.6g}, learned {:.6g}",
+                     set.frames, set.size(), alone, rules, learned);
+}
+
+// dntrain trust: the temporal filter's learned trust.
+int fitTrustMode(const Options& o) {
+  torch::set_num_threads(o.threads > 0 ? o.threads
+                                       : static_cast<int>(std::thread::hardware_concurrency()));
+  const std::vector<std::string> trainDirs = trustDumps(o, false), valDirs = trustDumps(o, true);
+  if (trainDirs.empty()) throw IoError(o.data + ": no scene_*/dump4 or dump16 to fit on");
+  const TrustSet train = loadTrustSet(trainDirs, 2), val = loadTrustSet(valDirs, 2);
+  TrustFitOptions options;
+  if (o.given.count("--steps")) options.steps = static_cast<int>(o.steps);
+  if (o.given.count("--batch")) options.batch = static_cast<int>(o.batch);
+  if (o.given.count("--lr")) options.learningRate = o.lr;
+  options.seed = o.seed;
+  fmt::print(stderr, "dntrain trust: {} dump folders, {} frames, {} pixels; {} held out\n",
+             trainDirs.size(), train.frames, train.size(), val.frames);
+  double recent = 0.0;
+  const temporal::LearnedTrust trust = fitTrust(train, options, [&](int step, double loss) {
+    recent += loss;
+    if (step % 500 == 0)
+      fmt::print(stderr, "dntrain trust: step {}: loss {:.6g}\n", step, recent / 500), recent = 0.0;
+  });
+  fmt::print(stderr, "dntrain trust: training: {}\n", trustReport(train, trust));
+  if (val.size() > 0) fmt::print(stderr, "dntrain trust: held out: {}\n", trustReport(val, trust));
+  writeFileAtomically(o.out, trust.toText() + "\n");
+  fmt::print(stderr, "dntrain trust: wrote {}\n", o.out);
   return cli::kExitOk;
 }
 
@@ -736,6 +848,7 @@ int importOidnModel(const Options& o) {
 
 int run(const Options& o) {
   if (o.mode == "defaults") return setDefaults(o);
+  if (o.mode == "trust") return fitTrustMode(o);
   if (o.mode == "import-oidn") return importOidnModel(o);
   if (o.mode == "rebase") return rebaseControl(o);
   if (o.mode == "prior") return extractPrior(o);

@@ -118,6 +118,8 @@ def denoise(args, scene, spp, method, out):
             cmd += ["--colour", args.colour]
         if args.light_spread:
             cmd += ["--light-spread", args.light_spread]
+        if args.trust:
+            cmd += ["--trust", args.trust]
         return run(cmd, log=os.path.join(out, method + ".log"))[0]
     if done and not args.force and len(done) == len(frames):
         return None
@@ -264,6 +266,9 @@ def main():
     ap.add_argument("--colour", default="", help="LOW,HIGH: the colour test's thresholds")
     ap.add_argument("--fvvdp-python", default="", help="an interpreter with pyfvvdp: also FovVideoVDP")
     ap.add_argument("--light-spread", default="", help="the spread above which a neighbour is left out")
+    ap.add_argument("--trust", default="",
+                    help="the filter alone with this learned trust (dntrain trust's output); the "
+                         "temporal default takes the one --model carries, if any")
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
     ap.add_argument("--window", type=int, default=4)

@@ -744,3 +744,81 @@ TEST_CASE("temporal filter: a light pass filtered with the results' weights flic
         temporal::filterWith(temporal::filterFrame(windowOf(frames), t).weights, images));
   CHECK(flicker(filtered) < flicker(passes) / 3);
 }
+
+namespace {
+
+// A learned trust whose every weight is the logistic of `bias` (no weight
+// on any feature): 12 -> 1.
+temporal::LearnedTrust constantTrust(float bias) {
+  std::vector<float> params(temporal::kTrustFeatureCount, 0.0f);
+  params.push_back(bias);
+  return temporal::LearnedTrust({temporal::kTrustFeatureCount, 1}, params);
+}
+
+}  // namespace
+
+TEST_CASE("learned trust: the network computed by hand, its text round trip, bad text refused") {
+  // 12 -> 2 -> 1: hidden = relu(W1 f + b1), out = logistic(W2 hidden + b2).
+  std::vector<float> params(2 * temporal::kTrustFeatureCount, 0.0f);
+  params[0] = 1.0f, params[1] = -2.0f;              // hidden 0
+  params[temporal::kTrustFeatureCount + 2] = 0.5f;  // hidden 1
+  params.insert(params.end(), {0.25f, -1.0f, /*W2*/ 3.0f, -4.0f, /*b2*/ 0.1f});
+  const temporal::LearnedTrust trust({temporal::kTrustFeatureCount, 2, 1}, params);
+  float f[temporal::kTrustFeatureCount] = {2.0f, 0.5f, 4.0f};
+  // hidden 0 = relu(2 - 1 + 0.25) = 1.25; hidden 1 = relu(0.5 * 4 - 1) = 1.
+  const double expected = 1.0 / (1.0 + std::exp(-(3.0 * 1.25 - 4.0 * 1.0 + 0.1)));
+  CHECK(trust.weigh(f) == doctest::Approx(expected).epsilon(1e-6));
+  f[1] = 2.0f;  // hidden 0 = relu(2 - 4 + 0.25) = 0
+  CHECK(trust.weigh(f) == doctest::Approx(1.0 / (1.0 + std::exp(-(-4.0 + 0.1)))).epsilon(1e-6));
+
+  const temporal::LearnedTrust again = temporal::LearnedTrust::fromText(trust.toText());
+  CHECK(again.toText() == trust.toText());
+  CHECK(again.weigh(f) == trust.weigh(f));
+  CHECK_THROWS_AS(temporal::LearnedTrust::fromText("12 2 1 0.5"), std::invalid_argument);
+  CHECK_THROWS_AS(temporal::LearnedTrust::fromText("12 2 1 : 0.5"), std::invalid_argument);
+  CHECK_THROWS_AS(temporal::LearnedTrust({11, 1}, std::vector<float>(12)), std::invalid_argument);
+}
+
+TEST_CASE("learned trust: trusting nothing gives the frame alone; its view is what it weighs") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 900, 1000);
+  temporal::TemporalOptions options;
+  options.learnedTrust = std::make_shared<temporal::LearnedTrust>(constantTrust(-100.0f));
+  const temporal::TemporalResult none = temporal::filterFrame(windowOf(frames), 2, options);
+  CHECK(none.color.pixels == frames[2].denoised.pixels);
+
+  // Trusting fully: each neighbour weighs what the guides trust, and the
+  // observer sees every kept neighbour's features and those weights.
+  options.learnedTrust = std::make_shared<temporal::LearnedTrust>(constantTrust(100.0f));
+  std::vector<temporal::TrustSamples> seen;
+  options.observeTrust = [&](const temporal::TrustSamples& s) { seen.push_back(s); };
+  const temporal::TemporalResult all = temporal::filterFrame(windowOf(frames), 2, options);
+  REQUIRE(seen.size() == 1);
+  const temporal::TrustSamples& s = seen.front();
+  CHECK(s.frames == std::vector<std::size_t>{1, 0, 3, 4});
+  REQUIRE(s.weights.size() == 4);
+  for (std::size_t k = 0; k < 4; ++k)
+    for (std::size_t i = 0; i < s.weights[k].size(); ++i) {
+      const float* f = &s.features[k][i * temporal::kTrustFeatureCount];
+      CHECK(s.weights[k][i] == doctest::Approx(f[temporal::kGuideTrust]));
+      CHECK(f[temporal::kDistance] == (k == 0 || k == 2 ? 0.25f : 0.5f));
+      CHECK(f[temporal::kFuture] == (k >= 2 ? 1.0f : 0.0f));
+    }
+  CHECK(meanSquaredError(all.color, truth.color) <
+        0.4 * meanSquaredError(frames[2].denoised, truth.color));
+}
+
+TEST_CASE("learned trust: the rules' weights reach the observer as they filter") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 1100, 1200);
+  temporal::TemporalOptions options;
+  std::vector<temporal::TrustSamples> seen;
+  options.observeTrust = [&](const temporal::TrustSamples& s) { seen.push_back(s); };
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1, options);
+  REQUIRE(seen.size() == 1);
+  REQUIRE(seen[0].weights.size() == r.weights.neighbours.size());
+  for (std::size_t k = 0; k < seen[0].weights.size(); ++k)
+    CHECK(seen[0].weights[k] == r.weights.neighbours[k].weight);
+  // Observing changes nothing.
+  CHECK(r.color.pixels == temporal::filterFrame(windowOf(frames), 1).color.pixels);
+}

@@ -96,11 +96,17 @@ void checkFilesBeforeWork(const Options& o, const Jobs& jobs,
   cli::checkFiles(inputs, outputs, o.inplace ? cli::Inplace::Allow : cli::Inplace::Offer);
 }
 
-std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& jobs) {
+std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& jobs,
+                                                 const Denoiser& denoiser) {
   if (!o.temporal || o.inputs.size() != 1 || !isFramePattern(o.inputs.front())) return nullptr;
   temporal::SequenceSettings settings = o.sequence;
   settings.read = o.read;
   settings.filter.threads = torch::get_num_threads();
+  const auto& notes = denoiser.info().notes;
+  const auto trust = notes.find("temporal_trust");
+  if (trust != notes.end() && o.temporalTrust != "rules")
+    settings.filter.learnedTrust = std::make_shared<const temporal::LearnedTrust>(
+        temporal::LearnedTrust::fromText(trust->second));
   std::vector<std::string> files;
   for (const auto& job : jobs) files.push_back(job.first);
   std::string frameByFrame;

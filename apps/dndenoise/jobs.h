@@ -33,6 +33,7 @@ void checkFilesBeforeWork(const Options& o, const Jobs& jobs,
 
 // The temporal plan of a sequence input (--temporal on, one input pattern with
 // motion vectors), or nullptr; prints one line when it denoises frame by frame.
-std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& jobs);
+std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& jobs,
+                                                 const Denoiser& denoiser);
 
 }  // namespace dn::dndenoise

@@ -93,6 +93,11 @@ output:
                       two; filter: the average of results alone (one network
                       pass a frame, not two); off: every frame alone
   --window N          neighbours on each side for --temporal, 1-8 (default 4)
+  --temporal-trust learned|rules
+                      how --temporal weighs each neighbour per pixel: the small
+                      network the model file carries (learned, the default
+                      where it has one), or the hand-set light and colour
+                      tests (rules)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
@@ -298,6 +303,10 @@ Options parseArgs(int argc, char** argv) {
       o.temporal = v != "off";
       o.sequence.filter.accumulatedShare =
           v == "filter" ? 0.0 : temporal::TemporalOptions().accumulatedShare;
+    } else if (args.flag("--temporal-trust")) {
+      o.temporalTrust = args.value("--temporal-trust");
+      if (o.temporalTrust != "learned" && o.temporalTrust != "rules")
+        throw cli::UsageError("--temporal-trust must be learned or rules, got " + o.temporalTrust);
     } else if (args.flag("--window")) {
       o.sequence.radius = args.intValue("--window", 1, 8);
     } else if (args.flag("--motion")) {
@@ -407,6 +416,9 @@ void checkOptionsApply(const Options& o, const Denoiser& denoiser) {
   const bool oidn = denoiser.overOidnBase();
   const bool control = oidn && info.has_control;
   const bool diffusionControl = control && info.oidn.control.diffusion;
+  if (o.temporalTrust == "learned" && !info.notes.count("temporal_trust"))
+    throw cli::UsageError("--temporal-trust learned: " + o.model +
+                          " carries no learned trust (dntrain defaults --temporal-trust)");
   for (const auto& [flag, scope] : o.given) {
     const char* needs = nullptr;
     if (scope == OptionScope::OidnBase && !oidn)

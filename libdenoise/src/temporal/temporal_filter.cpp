@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <exception>
 #include <functional>
 #include <mutex>
@@ -22,8 +23,8 @@ namespace {
 Image tonemapped(const Image& linear, double scale) {
   Image out = linear;
   for (float& v : out.pixels) {
-    const double s = std::max(0.0, double(v) * scale);
-    v = static_cast<float>(s / (1.0 + s));
+    const double s = std::max(0.0, double(v) * scale);        // NaN: 0
+    v = s < 1e30 ? static_cast<float>(s / (1.0 + s)) : 1.0f;  // an infinite firefly: 1
   }
   return out;
 }
@@ -280,8 +281,10 @@ struct Contribution {
   // Where each pixel of the frame is in the neighbour, and the taps its images are brought in by.
   motion::Resampling resampling;
   Image relight;  // relit: the factor its result was brought to the frame's light by
+  std::vector<float> lightChange;  // the renders' test per pixel (standard errors); empty if relit
   std::vector<double> weight;
-  double spread = 0.0;  // of its differences from the frame's result, in local noise levels
+  double spread = 0.0;      // of its differences from the frame's result, in local noise levels
+  double fullSpread = 0.0;  // the same, not capped at maxSpread
 };
 
 // Per pixel, |tonemapped `image` - the frame's result|, in local noise levels.
@@ -333,27 +336,35 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     out.image = scaled(std::move(out.image), out.relight);
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
     fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
-    if (fullSpread > options.changedLightSpread) {
-      out.verdict = Contribution::Verdict::ChangedLight;
+    out.verdict = fullSpread > options.changedLightSpread ? Contribution::Verdict::ChangedLight
+                                                          : Contribution::Verdict::Relit;
+    // The learned trust weighs such a neighbour per pixel instead of leaving
+    // it out whole; an observer of the rules sees it before they do.
+    if (out.verdict == Contribution::Verdict::ChangedLight && options.learnedTrust)
+      out.verdict = Contribution::Verdict::Relit;
+    else if (out.verdict == Contribution::Verdict::ChangedLight && !options.observeTrust)
       return out;
-    }
-    out.verdict = Contribution::Verdict::Relit;
   }
+  out.fullSpread = fullSpread;
   out.spread = std::min(fullSpread, options.maxSpread);
   out.weight.assign(out.image.pixelCount(), 0.0);
   // The renders' own light test would see the change that relighting undid.
-  if (out.verdict == Contribution::Verdict::Relit) {
+  if (!out.relight.empty()) {
     std::copy(trust.pixels.begin(), trust.pixels.end(), out.weight.begin());
     out.resampling = std::move(plan);
     return out;
   }
-  const std::vector<float> changed =
+  out.lightChange =
       lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
                   centre.residual, residual, options.lightBox);
+  // The learned trust weighs the light test's figure with everything else.
+  const bool lightTest = !options.learnedTrust;
   for (std::size_t i = 0; i < out.weight.size(); ++i)
-    out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - changed[i]) /
-                                                     (options.lightHigh - options.lightLow),
-                                                 0.0, 1.0);
+    out.weight[i] =
+        trust.pixels[i] * (lightTest ? std::clamp((options.lightHigh - out.lightChange[i]) /
+                                                      (options.lightHigh - options.lightLow),
+                                                  0.0, 1.0)
+                                     : 1.0);
   out.resampling = std::move(plan);
   return out;
 }
@@ -429,6 +440,70 @@ void applyColourTest(Contribution& k, const Image& referenceMapped, const Centre
   }
 }
 
+// The frame's result and every kept neighbour's, weighted by the guides'
+// trust alone, tonemapped: what the learned trust compares each with.
+Image guideMean(const Centre& centre, const std::vector<Contribution>& contributions) {
+  std::vector<std::vector<double>> trust;
+  std::vector<Weighted> others;
+  trust.reserve(contributions.size());
+  for (const Contribution& k : contributions) {
+    if (k.weight.empty()) continue;
+    const Image& t = k.resampling.trust;
+    trust.emplace_back(t.pixels.begin(), t.pixels.end());
+    others.push_back({&k.image, &trust.back()});
+  }
+  const Image& own = centre.frame->denoised;
+  return tonemapped(toImage(weightedMean(own, others).value, own), centre.scale);
+}
+
+// Per pixel, what the learned trust sees of neighbour `k` (learned_trust.h).
+std::vector<float> trustFeatures(const Centre& centre, const Contribution& k,
+                                 const Image& meanMapped, int distance, bool forward) {
+  const Image& own = centre.mapped;
+  const int w = own.width, h = own.height;
+  const Image mapped = tonemapped(k.image, centre.scale);
+  std::vector<float> toOwn = absoluteDifference(mapped, own);
+  std::vector<float> toMean = absoluteDifference(mapped, meanMapped);
+  for (std::size_t i = 0; i < toOwn.size(); ++i)
+    toOwn[i] /= centre.noise[i], toMean[i] /= centre.noise[i];
+  const BoxSums ownSums(w, h, 1, [&](std::size_t i, double* v) { v[0] = toOwn[i]; });
+  const Image& positions = k.resampling.positions;
+  std::vector<float> out(own.pixelCount() * kTrustFeatureCount, 0.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * w + x;
+      float* f = &out[i * kTrustFeatureCount];
+      const BoxSums::Box box = ownSums.box(x, y, 1);
+      const float* p = positions.pixel(x, y);
+      const double moved = std::hypot(p[0] - x, p[1] - y);
+      double brightness = 0.0;
+      for (int c = 0; c < own.channels; ++c) brightness += own.at(x, y, c) / own.channels;
+      f[kGuideTrust] = k.resampling.trust.pixels[i];
+      f[kOwnDifference] = std::log1p(toOwn[i]);
+      f[kOwnDifferenceBox] = static_cast<float>(std::log1p(ownSums.sum(box, 0) / box.pixels()));
+      f[kMeanDifference] = std::log1p(toMean[i]);
+      f[kLightChange] = k.lightChange.empty() ? 0.0f : std::log1p(k.lightChange[i]);
+      f[kMotion] =
+          std::isfinite(moved) ? static_cast<float>(std::log1p(std::min(moved, 1e3))) : 0.0f;
+      f[kDistance] = distance / 4.0f;
+      f[kNoiseLevel] = std::log(centre.noise[i]);
+      f[kSpread] = static_cast<float>(std::min(k.fullSpread, 3.0));
+      f[kRelit] = k.relight.empty() ? 0.0f : 1.0f;
+      f[kBrightness] = static_cast<float>(brightness);
+      f[kFuture] = forward ? 1.0f : 0.0f;
+    }
+  return out;
+}
+
+void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
+                       const LearnedTrust& trust) {
+  for (std::size_t i = 0; i < k.weight.size(); ++i) {
+    if (k.weight[i] <= 0.0) continue;
+    const float w = trust.weigh(&features[i * kTrustFeatureCount]);
+    k.weight[i] = w > 0.0f ? k.weight[i] * w : 0.0;  // NaN (a feature of a NaN render): 0
+  }
+}
+
 // Runs task(0 .. count-1) on up to `threads` threads; the first exception
 // thrown is rethrown here, after every thread has stopped.
 void forEach(std::size_t count, int threads, const std::function<void(std::size_t)>& task) {
@@ -467,7 +542,7 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
     const Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
     Image moved = motion::reprojectNearest(frames[k]->noisy, c.resampling.positions);
-    if (c.verdict == Contribution::Verdict::Relit) moved = scaled(std::move(moved), c.relight);
+    if (!c.relight.empty()) moved = scaled(std::move(moved), c.relight);
     for (std::size_t i = 0; i < n; ++i) {
       const double w = c.weight[i];
       if (w <= 0.0) continue;
@@ -514,8 +589,8 @@ FilterWeights weightsOf(std::vector<Contribution> contributions,
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
-    out.neighbours.push_back({indices[k], std::move(c.resampling),
-                              c.verdict == Contribution::Verdict::Relit, std::move(c.weight)});
+    out.neighbours.push_back(
+        {indices[k], std::move(c.resampling), !c.relight.empty(), std::move(c.weight)});
   }
   return out;
 }
@@ -552,10 +627,43 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     const Neighbour& nb = neighbours[n];
     contributions[n] = contributionOf(c, *nb.frame, nb.chain, nb.forward, options);
   });
-  const Image referenceMapped = tonemapped(
-      colourReference(current.denoised, contributions, options.colourReference), c.scale);
-  forEach(contributions.size(), options.threads,
-          [&](std::size_t n) { applyColourTest(contributions[n], referenceMapped, c, options); });
+  // The learned trust's view of each neighbour, where it or an observer needs it.
+  std::vector<std::vector<float>> features(contributions.size());
+  if (options.learnedTrust || options.observeTrust) {
+    const Image meanMapped = guideMean(c, contributions);
+    forEach(contributions.size(), options.threads, [&](std::size_t n) {
+      if (contributions[n].weight.empty()) return;
+      const long distance = std::labs(long(neighbours[n].index) - long(centre));
+      features[n] =
+          trustFeatures(c, contributions[n], meanMapped, int(distance), neighbours[n].forward);
+    });
+  }
+  if (options.learnedTrust) {
+    forEach(contributions.size(), options.threads, [&](std::size_t n) {
+      if (!features[n].empty())
+        applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
+    });
+  } else {
+    // The rules leave a neighbour whose light changed out whole (kept so far
+    // only for the observer).
+    for (Contribution& k : contributions)
+      if (k.verdict == Contribution::Verdict::ChangedLight) k.weight.assign(k.weight.size(), 0.0);
+    const Image referenceMapped = tonemapped(
+        colourReference(current.denoised, contributions, options.colourReference), c.scale);
+    forEach(contributions.size(), options.threads,
+            [&](std::size_t n) { applyColourTest(contributions[n], referenceMapped, c, options); });
+  }
+  if (options.observeTrust) {
+    TrustSamples samples{current.denoised, c.scale, {}, {}, {}, {}};
+    for (std::size_t n = 0; n < contributions.size(); ++n) {
+      if (features[n].empty()) continue;
+      samples.frames.push_back(neighbours[n].index);
+      samples.moved.push_back(contributions[n].image);
+      samples.features.push_back(std::move(features[n]));
+      samples.weights.push_back(contributions[n].weight);
+    }
+    options.observeTrust(samples);
+  }
 
   const WeightedMean mean = weightedMean(current.denoised, contributions);
   TemporalResult result;

@@ -11,12 +11,15 @@
 // (blendWithHistory).
 #pragma once
 
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "dn/image.h"
 #include "dn/motion/motion.h"
 #include "dn/motion/reproject.h"
+#include "dn/temporal/learned_trust.h"
 
 namespace dn::temporal {
 
@@ -30,6 +33,17 @@ struct WindowFrame {
   Image history;
   motion::Guides guides;
   motion::MotionField motion;
+};
+
+// What the learned trust sees of a frame's neighbours, for fitting it
+// (experiments/temporal_trust/): each neighbour the whole-frame tests kept.
+struct TrustSamples {
+  Image own;                                 // the frame's result
+  double scale = 1.0;                        // its autoexposure
+  std::vector<std::size_t> frames;           // per neighbour: its index in the window
+  std::vector<Image> moved;                  // its result brought into the frame
+  std::vector<std::vector<float>> features;  // per pixel, kTrustFeatureCount (learned_trust.h)
+  std::vector<std::vector<double>> weights;  // per pixel, the weight the filter gave it
 };
 
 struct TemporalOptions {
@@ -80,6 +94,11 @@ struct TemporalOptions {
   // filtered results' (the tuning half lost 0.1-0.2 dB at 16 spp without it).
   double historyMotion = 0.5;
   int threads = 1;  // neighbours brought in at once; the result does not depend on it
+  // Where set, each neighbour's weight per pixel is the guides' trust times
+  // this network's, in place of the renders' light test and the colour test.
+  std::shared_ptr<const LearnedTrust> learnedTrust;
+  // Where set, called once a frame with its neighbours' features and weights.
+  std::function<void(const TrustSamples&)> observeTrust;
 };
 
 // What one frame took from its neighbours, for -v.
