@@ -10,12 +10,14 @@
 
 #include <ATen/CPUGeneratorImpl.h>
 
+#include <cstring>
 #include <tuple>
 
 #include "dn/infer/denoiser.h"
 #include "dn/infer/device.h"
 #include "dn/infer/oidn_filter.h"
 #include "dn/metrics.h"
+#include "dn/nn/host_staging.h"
 #include "dn/nn/model_inputs.h"
 #include "dn/tonemap.h"
 
@@ -202,6 +204,40 @@ TEST_CASE("images cross to a device exactly") {
     Image round = tensorToImage(onGpu);
     CHECK(torch::equal(torch::from_blob(round.pixels.data(), {int64_t(round.size())}).nan_to_num(0),
                        original.nan_to_num(0)));
+  }
+}
+
+TEST_CASE("buffers cross through the staging copies byte for byte") {
+  // Sizes around the copy's 1 MiB slices: none, one short slice, uneven ones.
+  for (const std::size_t floats : {std::size_t(0), std::size_t(1), std::size_t(1000),
+                                   (std::size_t(1) << 18) + 3, (std::size_t(5) << 18) + 17}) {
+    CAPTURE(floats);
+    auto generator = at::detail::createCPUGenerator(floats);
+    const torch::Tensor source = torch::randn({int64_t(floats)}, generator);
+    const float* from = source.data_ptr<float>();
+    const std::size_t bytes = floats * sizeof(float);
+    std::vector<float> copied(floats, -1.0f);
+    parallelCopy(copied.data(), from, bytes);
+    CHECK(std::memcmp(copied.data(), from, bytes) == 0);
+    const torch::Tensor staged = stagedCopy(from, {int64_t(floats)}, false);
+    CHECK(std::memcmp(staged.data_ptr<float>(), from, bytes) == 0);
+    std::vector<float> back(floats, -1.0f);
+    floatsToHost(floatsToDevice(from, {int64_t(floats)}, torch::kCPU), back.data());
+    CHECK(std::memcmp(back.data(), from, bytes) == 0);
+  }
+  if (!torch::cuda::is_available()) return;
+  CHECK(stagedCopy(std::vector<float>(8).data(), {8}, true).is_pinned());
+  // Two uploads of one size in a row: the second's staging may be the first's
+  // block again only once the device has read it.
+  const torch::Tensor a = torch::rand({3 << 20}), b = torch::rand({3 << 20});
+  const torch::Device cuda(torch::kCUDA);
+  const torch::Tensor onA = floatsToDevice(a.data_ptr<float>(), a.sizes(), cuda);
+  const torch::Tensor onB = floatsToDevice(b.data_ptr<float>(), b.sizes(), cuda);
+  for (const auto& [host, onDevice] : {std::pair(a, onA), std::pair(b, onB)}) {
+    CHECK(onDevice.is_cuda());
+    std::vector<float> back(host.numel());
+    floatsToHost(onDevice, back.data());
+    CHECK(std::memcmp(back.data(), host.data_ptr<float>(), host.nbytes()) == 0);
   }
 }
 
