@@ -333,7 +333,8 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
     return decoded;
   });
   // The one value the host needs back, read once the frame's work is queued.
-  if (!onHost && colour && options.exposure <= 0.0f) result.exposure = exposure.item<float>();
+  if (!onHost && colour && options.exposure <= 0.0f)
+    result.exposure = options.deferExposureRead ? 0.0f : exposure.item<float>();
   result.exposureOnDevice = exposure;
   return result;
 }

@@ -263,6 +263,9 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   const bool gate = controlApplies(frame.names()) && options.control == ControlUse::Auto;
   FrameUploads uploads(frame, options.device);  // the gate reads what the networks sent
   if (!onHost && gate) run.uploads = &uploads;
+  // Off the CPU the host waits for the device once, for the result (its host
+  // buffer made while the networks run), and reads the exposure after it.
+  run.deferExposureRead = !onHost;
   auto [net, set] = base_->pick(frame.names());
   DenoiseResult result;
   // A second denoising of a frame whose aux the first cleaned (a sequence's
@@ -285,6 +288,7 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
     out = runOidn(net, *set, frame, run);
   }
   result.color = tensorToImage(out.image);
+  if (!onHost) out.exposure = out.exposureOnDevice.item<float>();
   result.exposure = out.exposure;
   result.steps = result.lightPathsSplit ? 6 : result.prefiltered ? 3 : 1;
   result.tileSize = out.tileSize;

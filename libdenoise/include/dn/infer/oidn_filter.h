@@ -87,11 +87,15 @@ struct OidnRunOptions {
   // Off the CPU, where given: the frame's buffers as sent once for all its
   // runs and the gate. A run on another frame (one made from it) sends its own.
   FrameUploads* uploads = nullptr;
+  // Off the CPU under autoexposure runOidn reads the exposure back at its end,
+  // a wait for the device; with this set it leaves that to the caller
+  // (OidnRunResult::exposureOnDevice), who can queue more work first.
+  bool deferExposureRead = false;
 };
 
 struct OidnRunResult {
-  torch::Tensor image;  // (1, 3, H, W) on the run's device: the set's denoised buffer
-  float exposure = 1.0f;
+  torch::Tensor image;             // (1, 3, H, W) on the run's device: the set's denoised buffer
+  float exposure = 1.0f;           // 0 where the read was deferred (deferExposureRead)
   torch::Tensor exposureOnDevice;  // the same as a 0-dim tensor there (off the CPU)
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
