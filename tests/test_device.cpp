@@ -224,8 +224,10 @@ TEST_CASE("buffers cross through the staging copies byte for byte") {
     CHECK(std::memcmp(copied.data(), from, bytes) == 0);
     const torch::Tensor staged = stagedCopy(from, {int64_t(floats)}, false);
     CHECK(std::memcmp(staged.data_ptr<float>(), from, bytes) == 0);
+    const torch::Tensor onCpu = floatsToDevice(from, {int64_t(floats)}, torch::kCPU);
+    if (floats > 0) CHECK(onCpu.data_ptr<float>() != from);  // a copy, not a view
     std::vector<float> back(floats, -1.0f);
-    floatsToHost(floatsToDevice(from, {int64_t(floats)}, torch::kCPU), back.data());
+    floatsToHost(onCpu, back.data());
     CHECK(std::memcmp(back.data(), from, bytes) == 0);
   }
   if (!torch::cuda::is_available()) return;

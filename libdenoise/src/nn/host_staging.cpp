@@ -11,7 +11,7 @@ namespace dn {
 
 namespace {
 
-// Below this a thread's start-up and the cache traffic outweigh its share.
+// Below this handing a slice to another thread costs more than it saves.
 constexpr std::size_t kSliceBytes = std::size_t(1) << 20;
 
 }  // namespace
@@ -36,6 +36,7 @@ torch::Tensor stagedCopy(const float* data, at::IntArrayRef sizes, bool pinned) 
 }
 
 torch::Tensor floatsToDevice(const float* data, at::IntArrayRef sizes, torch::Device device) {
+  if (device.is_cpu()) return stagedCopy(data, sizes, false);  // a copy, as on any device
   if (!device.is_cuda()) return torch::from_blob(const_cast<float*>(data), sizes).to(device);
   return stagedCopy(data, sizes, true).to(device, /*non_blocking=*/true);
 }

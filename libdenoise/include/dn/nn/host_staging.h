@@ -23,9 +23,9 @@ void parallelCopy(void* to, const void* from, std::size_t bytes);
 // it, so the next frame of the same size reuses it without cudaHostAlloc.
 torch::Tensor stagedCopy(const float* data, at::IntArrayRef sizes, bool pinned);
 
-// `data` (C order, of `sizes`) as a float tensor on `device`. On CUDA through
-// pinned staging and an asynchronous copy (ordered on the current stream
-// before any later work there); elsewhere `.to(device)` of the floats.
+// A copy of `data` (C order, of `sizes`) as a float tensor on `device`. On
+// CUDA through pinned staging and an asynchronous copy (ordered on the
+// current stream before any later work there); on the CPU stagedCopy.
 torch::Tensor floatsToDevice(const float* data, at::IntArrayRef sizes, torch::Device device);
 
 // The contiguous float tensor `source`, on any device, into `to` (its numel
