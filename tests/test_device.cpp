@@ -1,21 +1,26 @@
 // Device placement (dn/infer/device.h and DenoiseOptions::device). Without a GPU
 // (CI, the CPU-only Debian LibTorch): CUDA and half precision are refused with
 // a clear error before any work, and the diffusion models refuse every device
-// but the CPU; the pieces of the GPU path that run anywhere (images staged in
-// half, the autoexposure as tensor operations) are checked on the CPU. With
-// one (bench/gpu/check_cuda.sh): the OIDN base's modes on CUDA agree with the
-// CPU, in float and in half.
+// but the CPU; the pieces of the GPU path that run anywhere (images as they
+// cross, the staging copies, a frame's uploads and the gate on them, the
+// autoexposure as tensor operations) are checked on the CPU. With one
+// (bench/gpu/check_cuda.sh): the OIDN base's modes and the gate on CUDA agree
+// with the CPU, in float and in half, and pinned uploads arrive intact.
 #include "doctest_torch.h"
 #include "tiny_models.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 
+#include <cstring>
 #include <tuple>
 
 #include "dn/infer/denoiser.h"
 #include "dn/infer/device.h"
+#include "dn/infer/frame_uploads.h"
+#include "dn/infer/noise_estimate.h"
 #include "dn/infer/oidn_filter.h"
 #include "dn/metrics.h"
+#include "dn/nn/host_staging.h"
 #include "dn/nn/model_inputs.h"
 #include "dn/tonemap.h"
 
@@ -203,6 +208,95 @@ TEST_CASE("images cross to a device exactly") {
     CHECK(torch::equal(torch::from_blob(round.pixels.data(), {int64_t(round.size())}).nan_to_num(0),
                        original.nan_to_num(0)));
   }
+}
+
+TEST_CASE("buffers cross through the staging copies byte for byte") {
+  // Sizes around the copy's 1 MiB slices: none, one short slice, uneven ones.
+  for (const std::size_t floats : {std::size_t(0), std::size_t(1), std::size_t(1000),
+                                   (std::size_t(1) << 18) + 3, (std::size_t(5) << 18) + 17}) {
+    CAPTURE(floats);
+    auto generator = at::detail::createCPUGenerator(floats);
+    const torch::Tensor source = torch::randn({int64_t(floats)}, generator);
+    const float* from = source.data_ptr<float>();
+    const std::size_t bytes = floats * sizeof(float);
+    std::vector<float> copied(floats, -1.0f);
+    parallelCopy(copied.data(), from, bytes);
+    CHECK(std::memcmp(copied.data(), from, bytes) == 0);
+    const torch::Tensor staged = stagedCopy(from, {int64_t(floats)}, false);
+    CHECK(std::memcmp(staged.data_ptr<float>(), from, bytes) == 0);
+    const torch::Tensor onCpu = floatsToDevice(from, {int64_t(floats)}, torch::kCPU);
+    if (floats > 0) CHECK(onCpu.data_ptr<float>() != from);  // a copy, not a view
+    std::vector<float> back(floats, -1.0f);
+    floatsToHost(onCpu, back.data());
+    CHECK(std::memcmp(back.data(), from, bytes) == 0);
+  }
+  if (!torch::cuda::is_available()) return;
+  CHECK(stagedCopy(std::vector<float>(8).data(), {8}, true).is_pinned());
+  // Two uploads of one size in a row: the second's staging may be the first's
+  // block again only once the device has read it.
+  const torch::Tensor a = torch::rand({3 << 20}), b = torch::rand({3 << 20});
+  const torch::Device cuda(torch::kCUDA);
+  const torch::Tensor onA = floatsToDevice(a.data_ptr<float>(), a.sizes(), cuda);
+  const torch::Tensor onB = floatsToDevice(b.data_ptr<float>(), b.sizes(), cuda);
+  for (const auto& [host, onDevice] : {std::pair(a, onA), std::pair(b, onB)}) {
+    CHECK(onDevice.is_cuda());
+    std::vector<float> back(host.numel());
+    floatsToHost(onDevice, back.data());
+    CHECK(std::memcmp(back.data(), host.data_ptr<float>(), host.nbytes()) == 0);
+  }
+}
+
+TEST_CASE("a frame's buffers are sent once, and the gate reads the same copies") {
+  FrameBuffers frame = syntheticFrame(72, 40);
+  frame.buffers["depth"] = randomImage(72, 40, 1, 50.0, 6);
+  const torch::Tensor input = imageToTensor(frame.get("color"));
+  const torch::Tensor output = input * 0.5 + 0.1 * torch::rand_like(input);
+  const NoiseLeft loops = measureNoiseLeft(input, output, frame);
+  std::vector<torch::Device> devices = {torch::kCPU};
+  if (torch::cuda::is_available()) devices.emplace_back(torch::kCUDA);
+  for (const torch::Device& device : devices) {
+    CAPTURE(device.str());
+    FrameUploads uploads(frame, device);
+    CHECK(uploads.holds(frame));
+    CHECK_FALSE(uploads.holds(FrameBuffers(frame)));
+    const torch::Tensor& albedo = uploads.stored("albedo");
+    CHECK(albedo.device() == device);
+    CHECK(albedo.is_same(uploads.stored("albedo")));
+    CHECK(torch::equal(albedo.cpu(), imageToTensor(frame.get("albedo"))));
+    // The gate given the uploads measures what it measures from the frame.
+    const torch::Tensor in = input.to(device), out = output.to(device);
+    const NoiseLeft fromFrame = measureNoiseLeftByTensors(in, out, frame);
+    const NoiseLeft fromUploads = measureNoiseLeftByTensors(in, out, uploads);
+    CHECK(fromUploads.input == fromFrame.input);
+    CHECK(fromUploads.output == fromFrame.output);
+    const NoiseLeft dispatched = measureNoiseLeft(in, out, uploads);
+    CHECK(dispatched.input == doctest::Approx(loops.input).epsilon(1e-5));
+    CHECK(dispatched.output == doctest::Approx(loops.output).epsilon(1e-5));
+    if (device.is_cpu()) CHECK(dispatched.input == loops.input);  // the CPU's own loops
+  }
+}
+
+TEST_CASE("the default's gate on the device asked for: the CPU exactly, CUDA to float rounding") {
+  const Denoiser denoiser = Denoiser::fromFile(kModel);
+  FrameBuffers frame = syntheticFrame(72, 40);
+  frame.buffers["depth"] = randomImage(72, 40, 1, 50.0, 6);
+  DenoiseOptions onCpu;
+  onCpu.device = torch::Device(torch::kCPU);
+  const DenoiseResult reference = denoiser.denoise(frame, onCpu);
+  REQUIRE(reference.noiseLeft);
+  const DenoiseResult byDefault = denoiser.denoise(frame, DenoiseOptions());
+  CHECK(reference.color.pixels == byDefault.color.pixels);
+  CHECK(reference.noiseLeft->input == byDefault.noiseLeft->input);
+  CHECK(reference.noiseLeft->output == byDefault.noiseLeft->output);
+  if (!torch::cuda::is_available()) return;
+  at::globalContext().setAllowTF32CuDNN(false);
+  DenoiseOptions onGpu;
+  onGpu.device = torch::Device(torch::kCUDA);
+  const DenoiseResult gpu = denoiser.denoise(frame, onGpu);
+  REQUIRE(gpu.noiseLeft);
+  CHECK(gpu.steered == reference.steered);
+  CHECK(gpu.noiseLeft->input == doctest::Approx(reference.noiseLeft->input).epsilon(1e-4));
+  CHECK(gpu.noiseLeft->output == doctest::Approx(reference.noiseLeft->output).epsilon(1e-2));
 }
 
 TEST_CASE("OIDN's autoexposure made where the colour is agrees with libtonemap's") {

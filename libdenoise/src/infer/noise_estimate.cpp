@@ -99,15 +99,20 @@ NoiseSums noiseSums(const float* input, const float* output, int64_t channels, c
 
 NoiseLeft measureNoiseLeftByTensors(const torch::Tensor& input, const torch::Tensor& output,
                                     const FrameBuffers& frame) {
+  FrameUploads uploads(frame, input.device());
+  return measureNoiseLeftByTensors(input, output, uploads);
+}
+
+NoiseLeft measureNoiseLeftByTensors(const torch::Tensor& input, const torch::Tensor& output,
+                                    FrameUploads& frame) {
   if (input.size(2) < 3 || input.size(3) < 3) return {};
-  const std::vector<std::string> features = featureBuffers(frame);
+  const std::vector<std::string> features = featureBuffers(frame.frame());
   const torch::Tensor in = highPass(input.to(torch::kFloat32)).square().sum(1).to(torch::kDouble);
   const torch::Tensor out = highPass(output.to(torch::kFloat32)).square().sum(1).to(torch::kDouble);
   torch::Tensor flat = torch::zeros_like(in);
   if (!features.empty()) {
     std::vector<torch::Tensor> parts;
-    for (const auto& name : features)
-      parts.push_back(imageToDevice(frame.get(name), input.device()));
+    for (const auto& name : features) parts.push_back(frame.stored(name));
     const torch::Tensor guide = normalizeAux(torch::cat(parts, 1), features, tonemap::Curve::Log);
     const torch::Tensor edge = std::get<0>(highPass(guide).abs().max(1));
     flat = (edge < kFeatureEdge).to(torch::kDouble);
@@ -121,6 +126,12 @@ NoiseLeft measureNoiseLeftByTensors(const torch::Tensor& input, const torch::Ten
   left.input = std::sqrt(useFlat ? v[2] : v[0]);
   left.output = std::sqrt(useFlat ? v[3] : v[1]);
   return left;
+}
+
+NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
+                           FrameUploads& frame) {
+  if (!input.is_cpu()) return measureNoiseLeftByTensors(input, output, frame);
+  return measureNoiseLeft(input, output, frame.frame());
 }
 
 NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,

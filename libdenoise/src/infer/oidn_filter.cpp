@@ -145,10 +145,14 @@ torch::Tensor scalarOn(float value, torch::Device device) {
 }  // namespace
 
 torch::Tensor bufferOnDevice(const Image& image, torch::Device device) {
+  return bufferOnDevice(imageToDevice(image, device));
+}
+
+torch::Tensor bufferOnDevice(const torch::Tensor& stored) {
   // The stored channels cross, one is broadcast there.
-  const torch::Tensor stored = imageToDevice(image, device).squeeze(0);
-  const torch::Tensor three = stored.narrow(0, 0, image.channels >= 3 ? 3 : 1);
-  return three.expand({3, image.height, image.width});
+  const torch::Tensor planes = stored.squeeze(0);
+  const torch::Tensor three = planes.narrow(0, 0, planes.size(0) >= 3 ? 3 : 1);
+  return three.expand({3, planes.size(1), planes.size(2)});
 }
 
 torch::Tensor oidnInputOnDevice(const FrameBuffers& frame, const OidnInputSet& set, float exposure,
@@ -275,8 +279,11 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
   torch::Tensor exposure;  // on the device
   if (!onHost) {
     RECORD_FUNCTION("dn::upload", std::vector<c10::IValue>());
+    const bool sent = options.uploads && options.uploads->holds(frame);
     for (const std::string& name : set.buffers)
-      if (!onDevice.count(name)) onDevice[name] = bufferOnDevice(frame.get(name), options.device);
+      if (!onDevice.count(name))
+        onDevice[name] = sent ? bufferOnDevice(options.uploads->stored(name))
+                              : bufferOnDevice(frame.get(name), options.device);
   }
   // Albedo and normal are denoised at their own scale, as OIDN does.
   if (!colour)
@@ -326,7 +333,8 @@ OidnRunResult runOidn(OidnUNet& net, const OidnInputSet& set, const FrameBuffers
     return decoded;
   });
   // The one value the host needs back, read once the frame's work is queued.
-  if (!onHost && colour && options.exposure <= 0.0f) result.exposure = exposure.item<float>();
+  if (!onHost && colour && options.exposure <= 0.0f)
+    result.exposure = options.deferExposureRead ? 0.0f : exposure.item<float>();
   result.exposureOnDevice = exposure;
   return result;
 }

@@ -114,9 +114,10 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
   // The images held beside the networks' activations come out of the memory
   // budget (a 4K frame peaked at 4.2 GB without this): the colour and the
   // cleaned buffers, and with the split its parts, their transposed guides
-  // and the results.
-  const double held =
-      (splitLightPaths ? 10.0 : 3.0) * 3 * sizeof(float) * double(frame.width) * frame.height;
+  // and the results; with the gate's uploads, the albedo, normal and depth
+  // as sent, kept for it.
+  const double heldChannels = (splitLightPaths ? 30.0 : 9.0) + (options.uploads ? 7.0 : 0.0);
+  const double held = heldChannels * sizeof(float) * double(frame.width) * frame.height;
   int run = 0;
   auto next = [&]() {
     OidnRunOptions o = options;
@@ -258,6 +259,13 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   run.tile = options.tile;
   setMemoryBudget(run, options);
   run.progress = options.progress;
+  const bool onHost = options.device.is_cpu();
+  const bool gate = controlApplies(frame.names()) && options.control == ControlUse::Auto;
+  FrameUploads uploads(frame, options.device);  // the gate reads what the networks sent
+  if (!onHost && gate) run.uploads = &uploads;
+  // Off the CPU the host waits for the device once, for the result (its host
+  // buffer made while the networks run), and reads the exposure after it.
+  run.deferExposureRead = !onHost;
   auto [net, set] = base_->pick(frame.names());
   DenoiseResult result;
   // A second denoising of a frame whose aux the first cleaned (a sequence's
@@ -280,6 +288,7 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
     out = runOidn(net, *set, frame, run);
   }
   result.color = tensorToImage(out.image);
+  if (!onHost) out.exposure = out.exposureOnDevice.item<float>();
   result.exposure = out.exposure;
   result.steps = result.lightPathsSplit ? 6 : result.prefiltered ? 3 : 1;
   result.tileSize = out.tileSize;
@@ -288,11 +297,11 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   if (result.lightPathsSplit)
     result.buffersUsed.insert(result.buffersUsed.end(), diffusePassBuffers().begin(),
                               diffusePassBuffers().end());
-  if (controlApplies(frame.names()) && options.control == ControlUse::Auto) {
+  if (gate) {
     // Compared where the base works: exposed and PU-encoded, on the run's device.
-    const torch::Tensor input = imageToDevice(frame.get("color"), options.device) * out.exposure;
+    const torch::Tensor input = uploads.stored("color") * out.exposure;
     result.noiseLeft = measureNoiseLeft(puEncode(input.nan_to_num(0.0).clamp_min(0.0)),
-                                        puEncode(out.image * out.exposure), frame);
+                                        puEncode(out.image * out.exposure), uploads);
   }
   return result;
 }

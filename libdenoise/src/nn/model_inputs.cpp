@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "dn/io/buffers.h"
+#include "dn/nn/host_staging.h"
 
 namespace dn {
 
@@ -143,10 +144,7 @@ Image deviceTensorToImage(const torch::Tensor& tensor) {
   const torch::Tensor hwc = tensor.squeeze(0).to(torch::kFloat32).permute({1, 2, 0}).contiguous();
   const int64_t height = hwc.size(0), width = hwc.size(1), channels = hwc.size(2);
   Image image(static_cast<int>(width), static_cast<int>(height), static_cast<int>(channels));
-  const torch::Tensor staging = torch::empty(
-      hwc.sizes(), torch::TensorOptions().dtype(torch::kFloat).pinned_memory(tensor.is_cuda()));
-  staging.copy_(hwc);  // waits for the device
-  torch::from_blob(image.pixels.data(), hwc.sizes()).copy_(staging);
+  floatsToHost(hwc, image.pixels.data());
   return image;
 }
 
@@ -175,9 +173,9 @@ torch::Tensor imageToDevice(const Image& image, torch::Device device) {
   // The stored floats cross as they are, laid out on the device. Converting to
   // half on the host first halved the bytes but cost 39 ms a 1080p buffer on
   // an H200's host (check_cuda.sh), where the copy itself takes about 1 ms.
-  const torch::Tensor hwc = torch::from_blob(const_cast<float*>(image.pixels.data()),
-                                             {image.height, image.width, image.channels});
-  return hwc.to(device).permute({2, 0, 1}).unsqueeze(0);
+  return floatsToDevice(image.pixels.data(), {image.height, image.width, image.channels}, device)
+      .permute({2, 0, 1})
+      .unsqueeze(0);
 }
 
 torch::Tensor normalizedAuxRegion(const FrameBuffers& frame,

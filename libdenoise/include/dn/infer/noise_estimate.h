@@ -8,6 +8,7 @@
 
 #include <torch/torch.h>
 
+#include "dn/infer/frame_uploads.h"
 #include "dn/io/buffers.h"
 
 namespace dn {
@@ -41,11 +42,18 @@ struct NoiseLeft {
 // Images off the CPU are measured where they are (measureNoiseLeftByTensors).
 NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
                            const FrameBuffers& frame);
+// The same with the features taken from `frame`'s uploads off the CPU
+// (those the networks already sent are not sent again).
+NoiseLeft measureNoiseLeft(const torch::Tensor& input, const torch::Tensor& output,
+                           FrameUploads& frame);
 // The same sums in tensor operations on the images' device, the features sent
 // there and one small copy back: on a GPU, no frame-sized copy to the host and
 // no loop over it. Agrees with the CPU's loops to float rounding.
 NoiseLeft measureNoiseLeftByTensors(const torch::Tensor& input, const torch::Tensor& output,
                                     const FrameBuffers& frame);
+// The same with the features from `frame`'s uploads (on the images' device).
+NoiseLeft measureNoiseLeftByTensors(const torch::Tensor& input, const torch::Tensor& output,
+                                    FrameUploads& frame);
 
 // The fraction of the noise left above which it is taken for correlated
 // (docs/dndenoise.md has the measurements). The base leaves at most 0.59 of

@@ -15,6 +15,7 @@
 
 #include <torch/torch.h>
 
+#include "dn/infer/frame_uploads.h"
 #include "dn/infer/tiler.h"
 #include "dn/io/buffers.h"
 #include "dn/nn/oidn_unet.h"
@@ -39,6 +40,8 @@ using DeviceBuffers = std::map<std::string, torch::Tensor>;
 // channels cross as stored floats (dn::imageToDevice), and a
 // single channel is broadcast there.
 torch::Tensor bufferOnDevice(const Image& image, torch::Device device);
+// The same from a buffer already there as stored, (1, C, H, W).
+torch::Tensor bufferOnDevice(const torch::Tensor& stored);
 // The same made on `device` with tensor operations from the buffers as
 // stored: what crosses to a GPU is the region's raw pixels, or nothing for
 // the buffers in `onDevice`. Agrees with oidnInput to float rounding of the
@@ -81,11 +84,18 @@ struct OidnRunOptions {
   std::function<torch::Tensor(const torch::Tensor&, const TileRect&)> network;
   // Off the CPU: inputs a previous network left on the device (oidnInputOnDevice).
   DeviceBuffers onDevice;
+  // Off the CPU, where given: the frame's buffers as sent once for all its
+  // runs and the gate. A run on another frame (one made from it) sends its own.
+  FrameUploads* uploads = nullptr;
+  // Off the CPU under autoexposure runOidn reads the exposure back at its end,
+  // a wait for the device; with this set it leaves that to the caller
+  // (OidnRunResult::exposureOnDevice), who can queue more work first.
+  bool deferExposureRead = false;
 };
 
 struct OidnRunResult {
-  torch::Tensor image;  // (1, 3, H, W) on the run's device: the set's denoised buffer
-  float exposure = 1.0f;
+  torch::Tensor image;             // (1, 3, H, W) on the run's device: the set's denoised buffer
+  float exposure = 1.0f;           // 0 where the read was deferred (deferExposureRead)
   torch::Tensor exposureOnDevice;  // the same as a 0-dim tensor there (off the CPU)
   int64_t tileSize = 0;
   std::size_t tileCount = 0;
