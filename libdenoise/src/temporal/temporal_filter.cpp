@@ -336,14 +336,11 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     out.image = scaled(std::move(out.image), out.relight);
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
     fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
-    out.verdict = fullSpread > options.changedLightSpread ? Contribution::Verdict::ChangedLight
-                                                          : Contribution::Verdict::Relit;
-    // The learned trust weighs such a neighbour per pixel instead of leaving
-    // it out whole; an observer of the rules sees it before they do.
-    if (out.verdict == Contribution::Verdict::ChangedLight && options.learnedTrust)
-      out.verdict = Contribution::Verdict::Relit;
-    else if (out.verdict == Contribution::Verdict::ChangedLight && !options.observeTrust)
+    if (fullSpread > options.changedLightSpread) {
+      out.verdict = Contribution::Verdict::ChangedLight;
       return out;
+    }
+    out.verdict = Contribution::Verdict::Relit;
   }
   out.fullSpread = fullSpread;
   out.spread = std::min(fullSpread, options.maxSpread);
@@ -357,14 +354,10 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   out.lightChange =
       lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
                   centre.residual, residual, options.lightBox);
-  // The learned trust weighs the light test's figure with everything else.
-  const bool lightTest = !options.learnedTrust;
   for (std::size_t i = 0; i < out.weight.size(); ++i)
-    out.weight[i] =
-        trust.pixels[i] * (lightTest ? std::clamp((options.lightHigh - out.lightChange[i]) /
-                                                      (options.lightHigh - options.lightLow),
-                                                  0.0, 1.0)
-                                     : 1.0);
+    out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - out.lightChange[i]) /
+                                                     (options.lightHigh - options.lightLow),
+                                                 0.0, 1.0);
   out.resampling = std::move(plan);
   return out;
 }
@@ -638,21 +631,13 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
           trustFeatures(c, contributions[n], meanMapped, int(distance), neighbours[n].forward);
     });
   }
-  if (options.learnedTrust) {
-    forEach(contributions.size(), options.threads, [&](std::size_t n) {
-      if (!features[n].empty())
-        applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
-    });
-  } else {
-    // The rules leave a neighbour whose light changed out whole (kept so far
-    // only for the observer).
-    for (Contribution& k : contributions)
-      if (k.verdict == Contribution::Verdict::ChangedLight) k.weight.assign(k.weight.size(), 0.0);
-    const Image referenceMapped = tonemapped(
-        colourReference(current.denoised, contributions, options.colourReference), c.scale);
-    forEach(contributions.size(), options.threads,
-            [&](std::size_t n) { applyColourTest(contributions[n], referenceMapped, c, options); });
-  }
+  const Image referenceMapped = tonemapped(
+      colourReference(current.denoised, contributions, options.colourReference), c.scale);
+  forEach(contributions.size(), options.threads, [&](std::size_t n) {
+    applyColourTest(contributions[n], referenceMapped, c, options);
+    if (options.learnedTrust && !features[n].empty())
+      applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
+  });
   if (options.observeTrust) {
     TrustSamples samples{current.denoised, c.scale, {}, {}, {}, {}};
     for (std::size_t n = 0; n < contributions.size(); ++n) {

@@ -49,7 +49,7 @@ void appendFrame(const std::string& prefix, int stride, Columns& out) {
     bool any = false, finite = true;
     for (int64_t j = 0; j < k; ++j) {
       const float* f = &features.values[(j * n + i) * kTrustFeatureCount];
-      any = any || f[kGuideTrust] > 0.0f;
+      any = any || weights.values[j * n + i] > 0.0f;  // the network scales the rules' weight
       for (int c = 0; c < kTrustFeatureCount; ++c) finite = finite && std::isfinite(f[c]);
       for (int c = 0; c < 3; ++c)
         finite = finite && std::isfinite(moved.values[(j * n + i) * 3 + c]);
@@ -100,14 +100,14 @@ struct Mlp : torch::nn::Module {
       layers.push_back(
           register_module("layer" + std::to_string(l), torch::nn::Linear(sizes[l - 1], sizes[l])));
   }
-  // The weights (..., K) of features (..., K, F).
-  torch::Tensor forward(const torch::Tensor& features) {
+  // The weights (..., K) of features (..., K, F) over the rules' (..., K).
+  torch::Tensor forward(const torch::Tensor& features, const torch::Tensor& rules) {
     torch::Tensor x = (features - mean) / deviation;
     for (std::size_t l = 0; l < layers.size(); ++l) {
       x = layers[l]->forward(x);
       if (l + 1 < layers.size()) x = torch::relu(x);
     }
-    return torch::sigmoid(x.squeeze(-1)) * features.select(-1, kGuideTrust);
+    return torch::sigmoid(x.squeeze(-1)) * rules;
   }
   // As LearnedTrust: the standardisation folded into the first layer.
   temporal::LearnedTrust exported(const std::vector<int>& sizes) const {
@@ -155,13 +155,14 @@ double trustLoss(const TrustSet& set, const torch::Tensor& weights) {
 }
 
 torch::Tensor learnedWeights(const TrustSet& set, const temporal::LearnedTrust& trust) {
-  const torch::Tensor features = set.features.contiguous();
+  const torch::Tensor features = set.features.contiguous(), rules = set.rules.contiguous();
   torch::Tensor out = torch::zeros({set.size(), kMaxNeighbours});
   const float* f = features.data_ptr<float>();
+  const float* r = rules.data_ptr<float>();
   float* w = out.data_ptr<float>();
   for (int64_t i = 0; i < out.numel(); ++i) {
     const float* row = f + i * kTrustFeatureCount;
-    if (row[kGuideTrust] > 0.0f) w[i] = row[kGuideTrust] * trust.weigh(row);
+    if (r[i] > 0.0f) w[i] = r[i] * trust.weigh(row);
   }
   return out;
 }
@@ -185,9 +186,9 @@ temporal::LearnedTrust fitTrust(const TrustSet& set, const TrustFitOptions& opti
         static_cast<torch::optim::AdamOptions&>(group.options()).lr(options.learningRate / 10);
     const torch::Tensor pick = torch::randint(set.size(), {options.batch}, torch::kLong);
     const torch::Tensor loss =
-        pixelLoss(mlp->forward(set.features.index_select(0, pick)), set.moved.index_select(0, pick),
-                  set.own.index_select(0, pick), set.target.index_select(0, pick),
-                  set.scale.index_select(0, pick))
+        pixelLoss(mlp->forward(set.features.index_select(0, pick), set.rules.index_select(0, pick)),
+                  set.moved.index_select(0, pick), set.own.index_select(0, pick),
+                  set.target.index_select(0, pick), set.scale.index_select(0, pick))
             .mean();
     adam.zero_grad();
     loss.backward();

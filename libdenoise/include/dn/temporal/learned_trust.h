@@ -1,6 +1,6 @@
 // The temporal filter's trust learned from data: a small network that, per
-// pixel of a reprojected neighbour, weighs what the neighbour brings from what
-// the hand-set tests look at and more (experiments/temporal_trust/).
+// pixel of a reprojected neighbour, scales the weight the hand-set tests gave
+// it, from what they look at and more (experiments/temporal_trust/).
 #pragma once
 
 #include <string>

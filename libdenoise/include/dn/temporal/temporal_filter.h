@@ -94,8 +94,9 @@ struct TemporalOptions {
   // filtered results' (the tuning half lost 0.1-0.2 dB at 16 spp without it).
   double historyMotion = 0.5;
   int threads = 1;  // neighbours brought in at once; the result does not depend on it
-  // Where set, each neighbour's weight per pixel is the guides' trust times
-  // this network's, in place of the renders' light test and the colour test.
+  // Where set, each neighbour's weight per pixel after the tests above is
+  // multiplied by this network's: it takes trust away where they pass what
+  // does not follow the motion.
   std::shared_ptr<const LearnedTrust> learnedTrust;
   // Where set, called once a frame with its neighbours' features and weights.
   std::function<void(const TrustSamples&)> observeTrust;

@@ -32,8 +32,8 @@ struct TrustSet {
   int64_t size() const { return own.defined() ? own.size(0) : 0; }
 };
 
-// Every frame of the dump folders; of each, the pixels where some neighbour
-// is trusted, every `stride`-th of them. Throws dn::npy::NpyError on a bad file.
+// Every frame of the dump folders; of each, the pixels where the rules gave
+// some neighbour weight, every `stride`-th of them. Throws dn::npy::NpyError on a bad file.
 TrustSet loadTrustSet(const std::vector<std::string>& dumpDirs, int stride = 1);
 
 // The loss of weights (N, K) on `set`: the mean over pixels of the squared
