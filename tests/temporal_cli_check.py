@@ -82,14 +82,26 @@ def main():
     run(plain + ["-o", os.path.join(work, "on.#.exr"), "--temporal", "on"])
     run(plain + ["-o", os.path.join(work, "alone.#.exr"), "--temporal", "off"])
     filtered = run(plain + ["-o", os.path.join(work, "filter.#.exr"), "--temporal", "filter", "-v"])
+    run(plain + ["-o", os.path.join(work, "rules.#.exr"), "--temporal-trust", "rules"])
+    run(plain + ["-o", os.path.join(work, "learned.#.exr"), "--temporal-trust", "learned"])
     check(not any("accumulated over" in l for l in filtered.stderr.splitlines()),
           "--temporal filter: no render accumulated")
     frames = {name: [read_rgb(os.path.join(work, f"{name}.{n:04d}.exr")) for n in FRAMES]
-              for name in ("whole", "default", "on", "alone", "filter")}
+              for name in ("whole", "default", "on", "alone", "filter", "rules", "learned")}
     check(all(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["filter"])),
           "the default denoises the accumulated renders too (not the same as --temporal filter)")
     check(all(np.array_equal(a, b) for a, b in zip(frames["default"], frames["on"])),
           "the default uses the neighbours (= --temporal on)")
+    check(all(np.array_equal(a, b) for a, b in zip(frames["default"], frames["rules"])),
+          "the default weighs neighbours by the hand-set tests (= --temporal-trust rules)")
+    check(any(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["learned"])) and
+          all(not np.array_equal(a, b) for a, b in zip(frames["learned"], frames["alone"])),
+          "--temporal-trust learned: the model's network changes the weights, neighbours still used")
+    no_trust = os.path.join(os.path.dirname(os.path.abspath(args.testdata)), "models", "oidn.dnm")
+    result = run(plain + ["-o", os.path.join(work, "bad.#.exr"), "--temporal-trust", "learned",
+                          "--model", no_trust], expect=1)
+    check(len(result.stderr.strip().splitlines()) == 1 and "carries no learned trust" in result.stderr,
+          "--temporal-trust learned with a model without one: one line, exit 1")
     check(all(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["alone"])) and
           all(not np.array_equal(a, b) for a, b in zip(frames["whole"], frames["alone"])),
           "the default and --window 2 give other results than --temporal off (each frame alone)")
@@ -120,7 +132,8 @@ def main():
     check("(0 neighbours" in history[2] and "(1 neighbour" in history[1] and "(2 neighbours" in history[3],
           "its neighbours' chains stop at it (frame 2: frame 1 alone; frame 4: frames 5 and 6)")
 
-    for bad in (["--window", "0"], ["--temporal", "maybe"], ["--window", "9"]):
+    for bad in (["--window", "0"], ["--temporal", "maybe"], ["--window", "9"],
+                ["--temporal-trust", "maybe"]):
         result = run(base + ["-o", os.path.join(work, "bad.#.exr")] + bad, expect=1)
         check(len(result.stderr.strip().splitlines()) == 1, f"{' '.join(bad)}: one line, exit 1")
     check(not any(f.startswith("bad.") for f in os.listdir(work)), "no output after a bad argument")

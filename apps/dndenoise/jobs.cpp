@@ -104,7 +104,7 @@ std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& j
   settings.filter.threads = torch::get_num_threads();
   const auto& notes = denoiser.info().notes;
   const auto trust = notes.find("temporal_trust");
-  if (trust != notes.end() && o.temporalTrust != "rules")
+  if (trust != notes.end() && o.temporalTrust == "learned")
     settings.filter.learnedTrust = std::make_shared<const temporal::LearnedTrust>(
         temporal::LearnedTrust::fromText(trust->second));
   std::vector<std::string> files;

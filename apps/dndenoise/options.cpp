@@ -94,10 +94,12 @@ output:
                       pass a frame, not two); off: every frame alone
   --window N          neighbours on each side for --temporal, 1-8 (default 4)
   --temporal-trust learned|rules
-                      how --temporal weighs each neighbour per pixel: the small
-                      network the model file carries (learned, the default
-                      where it has one), or the hand-set light and colour
-                      tests (rules)
+                      how --temporal weighs each neighbour per pixel: the
+                      hand-set light and colour tests (rules, the default), or
+                      those scaled down by the small network the model file
+                      carries (learned: less lost where a moving surface's
+                      reflections or a sweeping shadow do not follow the
+                      motion, less gained where all stands still)
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)

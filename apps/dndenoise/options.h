@@ -48,8 +48,7 @@ struct Options {
   std::vector<GivenOption> given;           // options that act on some models only
   bool temporal = true;                     // --temporal on|filter; off: false
   dn::temporal::SequenceSettings sequence;  // --window, --motion, --temporal filter
-  std::string
-      temporalTrust;  // --temporal-trust learned|rules; empty: learned where the model has it
+  std::string temporalTrust = "rules";      // --temporal-trust learned|rules
 };
 
 // The options of the command line; -h, --version and --list-views print and exit.
