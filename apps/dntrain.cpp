@@ -19,7 +19,6 @@
 #include <fstream>
 #include <optional>
 #include <set>
-#include <sstream>
 #include <thread>
 
 #include "common/app.h"
@@ -661,22 +660,16 @@ const torch::nn::Module& weightsOf(const LoadedModel& loaded) {
   return *loaded.model;
 }
 
-// The text of a learned trust file, checked.
-std::string trustText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  try {
-    return temporal::LearnedTrust::fromText(text.str()).toText();
-  } catch (const std::exception& e) {
-    throw IoError(path + ": not a learned trust (" + e.what() + ")");
-  }
-}
-
 int setDefaults(const Options& o) {
   LoadedModel loaded = loadModelFile(o.model);
   ModelInfo& info = loaded.info;
-  if (!o.temporalTrust.empty()) info.notes["temporal_trust"] = trustText(o.temporalTrust);
+  if (!o.temporalTrust.empty()) {
+    try {
+      info.notes["temporal_trust"] = temporal::LearnedTrust::fromFile(o.temporalTrust).toText();
+    } catch (const std::invalid_argument& e) {
+      throw IoError(e.what());
+    }
+  }
   if (!o.respacing.empty()) info.respacing = o.respacing;
   if (o.defaultSkip >= 0) info.notes["default_skip"] = std::to_string(o.defaultSkip);
   if (o.defaultSpp > 0) info.notes["default_spp"] = std::to_string(o.defaultSpp);
@@ -710,16 +703,6 @@ int setDefaults(const Options& o) {
              exposure == info.notes.end() ? "none" : exposure->second,
              noise == info.notes.end() ? "none" : noise->second);
   return cli::kExitOk;
-}
-
-// `text` into `path` by way of a temporary file: no partial output.
-void writeFileAtomically(const std::string& path, const std::string& text) {
-  const std::string temporary = path + ".tmp";
-  {
-    std::ofstream out(temporary);
-    if (!(out << text) || !out.flush()) throw IoError(path + ": cannot be written");
-  }
-  fs::rename(temporary, path);
 }
 
 // The dump folders of the animated scenes under --data, training or held out.
@@ -771,7 +754,7 @@ int fitTrustMode(const Options& o) {
   });
   fmt::print(stderr, "dntrain trust: training: {}\n", trustReport(train, trust));
   if (val.size() > 0) fmt::print(stderr, "dntrain trust: held out: {}\n", trustReport(val, trust));
-  writeFileAtomically(o.out, trust.toText() + "\n");
+  writeAtomically(o.out, [&](std::ostream& out) { out << trust.toText() << "\n"; });
   fmt::print(stderr, "dntrain trust: wrote {}\n", o.out);
   return cli::kExitOk;
 }

@@ -15,8 +15,6 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <thread>
 
@@ -29,15 +27,6 @@
 using namespace dn;
 
 namespace {
-
-std::shared_ptr<const temporal::LearnedTrust> readTrust(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw IoError(path + ": cannot be read");
-  std::stringstream text;
-  text << in.rdbuf();
-  return std::make_shared<const temporal::LearnedTrust>(
-      temporal::LearnedTrust::fromText(text.str()));
-}
 
 // Images of one shape stacked as (K, H, W, C).
 std::vector<float> stackedPixels(const std::vector<Image>& images) {
@@ -90,7 +79,8 @@ int main(int argc, char** argv) {
       } else if (args.flag("--frames")) {
         frames = args.value("--frames");
       } else if (args.flag("--trust")) {
-        settings.filter.learnedTrust = readTrust(args.value("--trust"));
+        settings.filter.learnedTrust = std::make_shared<const temporal::LearnedTrust>(
+            temporal::LearnedTrust::fromFile(args.value("--trust")));
       } else if (args.flag("--dump-trust")) {
         dumpDir = args.value("--dump-trust");
       } else if (args.flag("--target")) {

@@ -140,6 +140,8 @@ bool parseSize(const std::string& text, uint64_t& value) {
   return true;
 }
 
+}  // namespace
+
 void writeAtomically(const std::string& path, const std::function<void(std::ostream&)>& write) {
   namespace fs = std::filesystem;
   const fs::path target(path);
@@ -164,8 +166,6 @@ void writeAtomically(const std::string& path, const std::function<void(std::ostr
     throw ModelError(path + ": cannot rename temporary file: " + error.message());
   }
 }
-
-}  // namespace
 
 std::string joinInts(const std::vector<int64_t>& values) {
   std::string text;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <sstream>
 #include <stdexcept>
 
@@ -27,12 +28,28 @@ LearnedTrust::LearnedTrust(std::vector<int> sizes, std::vector<float> params)
 LearnedTrust LearnedTrust::fromText(const std::string& text) {
   std::istringstream in(text);
   std::vector<int> sizes;
-  std::string word;
-  while (in >> word && word != ":") sizes.push_back(std::stoi(word));
-  if (word != ":") throw std::invalid_argument("learned trust: no ':' after the layer sizes");
   std::vector<float> params;
-  while (in >> word) params.push_back(std::stof(word));
+  std::string word;
+  bool colon = false;
+  try {
+    while (in >> word && !(colon = word == ":")) sizes.push_back(std::stoi(word));
+    while (colon && in >> word) params.push_back(std::stof(word));
+  } catch (const std::logic_error&) {  // stoi, stof: not a number, or out of range
+    throw std::invalid_argument("learned trust: '" + word + "' is not a number");
+  }
+  if (!colon) throw std::invalid_argument("learned trust: no ':' after the layer sizes");
   return LearnedTrust(std::move(sizes), std::move(params));
+}
+
+LearnedTrust LearnedTrust::fromFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  if (!(in && text << in.rdbuf())) throw std::invalid_argument(path + ": cannot be read");
+  try {
+    return fromText(text.str());
+  } catch (const std::exception& e) {
+    throw std::invalid_argument(path + ": not a learned trust (" + e.what() + ")");
+  }
 }
 
 std::string LearnedTrust::toText() const {

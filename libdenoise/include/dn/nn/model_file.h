@@ -5,6 +5,8 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <iosfwd>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -94,6 +96,10 @@ LoadedModel loadModelFile(const std::string& path);
 
 // The container under model files and training checkpoints: `kind` tags what it
 // holds, `text` is metadata, `archive` the tensors. Written atomically.
+// `write` into a temporary file beside `path`, renamed into place when
+// complete: no partial output. Throws ModelError naming `path`.
+void writeAtomically(const std::string& path, const std::function<void(std::ostream&)>& write);
+
 void writeArchiveFile(const std::string& path, const std::string& kind, const std::string& text,
                       torch::serialize::OutputArchive& archive);
 struct ArchiveFile {

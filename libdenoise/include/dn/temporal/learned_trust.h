@@ -37,6 +37,8 @@ class LearnedTrust {
 
   // "12 16 8 1 : p0 p1 ...", one line (a model file's metadata value).
   static LearnedTrust fromText(const std::string& text);
+  // The text of file `path`; std::invalid_argument names the file.
+  static LearnedTrust fromFile(const std::string& path);
   std::string toText() const;
 
   bool empty() const { return sizes_.empty(); }
