@@ -1,0 +1,852 @@
+#include "dn/temporal/device_filter.h"
+
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <tuple>
+
+#include "dn/nn/model_inputs.h"
+
+namespace dn::temporal {
+
+namespace {
+
+using torch::Tensor;
+namespace F = torch::nn::functional;
+
+// reproject.cpp's bits of Resampling::taps beyond the four bilinear taps'.
+constexpr int kCubicTaps = 1 << 4;
+constexpr int kBroughtIn = 1 << 5;
+
+// The frame's pixel grid, computed once a frame: coordinates and the sizes.
+struct Grid {
+  int width, height;
+  Tensor x, y;  // float per pixel
+  std::int64_t pixels() const { return std::int64_t(width) * height; }
+};
+
+Grid gridOf(const DeviceFrame& frame) {
+  const auto options = frame.denoised.options();
+  const Tensor xs = torch::arange(frame.width, options), ys = torch::arange(frame.height, options);
+  const auto xy = torch::meshgrid({ys, xs}, "ij");
+  return {frame.width, frame.height, xy[1].reshape(-1), xy[0].reshape(-1)};
+}
+
+Tensor zerosWhere(const Tensor& keep, const Tensor& values) {
+  return torch::where(keep, values, torch::zeros_like(values));
+}
+
+// tonemapped() of temporal_filter.cpp: Reinhard after `scale`; NaN: 0, beyond 1e30: 1.
+Tensor tonemapped(const Tensor& linear, const Tensor& scale) {
+  const Tensor s = linear * scale;
+  const Tensor positive = zerosWhere(s > 0, s);
+  return torch::where(positive < 1e30, positive / (positive + 1), torch::ones_like(s));
+}
+
+// Per pixel, the mean over channels of |a - b|.
+Tensor absoluteDifference(const Tensor& a, const Tensor& b) { return (a - b).abs().mean(0); }
+
+// OIDN's autoexposure (tonemap::oidnExposure): 0.18 over the geometric mean of
+// the luminance's means over bins of about 16 x 16 pixels.
+Tensor exposureOf(const Tensor& color, int width, int height) {
+  constexpr int kBin = 16;
+  const int binsY = (height + kBin - 1) / kBin, binsX = (width + kBin - 1) / kBin;
+  std::vector<std::int64_t> rowBin(height), columnBin(width);
+  for (int by = 0; by < binsY; ++by)
+    for (int y = by * height / binsY; y < (by + 1) * height / binsY; ++y) rowBin[y] = by;
+  for (int bx = 0; bx < binsX; ++bx)
+    for (int x = bx * width / binsX; x < (bx + 1) * width / binsX; ++x) columnBin[x] = bx;
+  const auto device = color.device();
+  const Tensor rows = torch::tensor(rowBin).to(device),
+               columns = torch::tensor(columnBin).to(device);
+  const Tensor clean = torch::where(torch::isfinite(color), color.clamp_min(0),
+                                    zerosWhere(color > 0, torch::full_like(color, FLT_MAX)));
+  const Tensor luminance =
+      (0.212671f * clean[0] + 0.715160f * clean[1] + 0.072169f * clean[2]).view({height, width});
+  const Tensor byRow = torch::zeros({binsY, width}, color.options()).index_add_(0, rows, luminance);
+  const Tensor sums = torch::zeros({binsY, binsX}, color.options()).index_add_(1, columns, byRow);
+  const Tensor ones = torch::ones({height, width}, color.options());
+  const Tensor counts =
+      torch::zeros({binsY, binsX}, color.options())
+          .index_add_(1, columns,
+                      torch::zeros({binsY, width}, color.options()).index_add_(0, rows, ones));
+  const Tensor mean = sums / counts;
+  const Tensor valid = mean > 1e-8f;
+  const Tensor logSum = zerosWhere(valid, torch::log2(mean)).sum(torch::kDouble);
+  const Tensor count = valid.sum();
+  return torch::where(count > 0, 0.18 / torch::exp2(logSum / count.clamp_min(1)),
+                      torch::ones_like(logSum))
+      .to(torch::kFloat);
+}
+
+// Sums over the (2r+1)^2 box around each pixel, zero beyond the image.
+Tensor boxSum(const Tensor& values, int r, const Grid& g) {
+  const int k = 2 * r + 1;
+  const auto options = F::AvgPool2dFuncOptions(k).stride(1).padding(r).count_include_pad(true);
+  return F::avg_pool2d(values.view({1, -1, g.height, g.width}), options).view({-1, g.pixels()}) *
+         float(k * k);
+}
+
+// Means over the box clipped to the image.
+Tensor boxMean(const Tensor& values, int r, const Grid& g) {
+  const auto options =
+      F::AvgPool2dFuncOptions(2 * r + 1).stride(1).padding(r).count_include_pad(false);
+  return F::avg_pool2d(values.view({1, -1, g.height, g.width}), options).view({-1, g.pixels()});
+}
+
+// Counts of the pixels where `mask` holds within the box: whole numbers.
+Tensor boxCount(const Tensor& mask, int r, const Grid& g) {
+  return torch::round(boxSum(mask.to(torch::kFloat), r, g));
+}
+
+// std::lround, clamped to [0, size): NaN gives 0 (callers mask it).
+Tensor nearest(const Tensor& v, int size) {
+  const Tensor d = torch::nan_to_num(v, 0.0).to(torch::kDouble);
+  return (torch::floor(d.abs() + 0.5) * d.sign()).clamp(0, size - 1).to(torch::kLong);
+}
+
+Tensor nearestPixel(const Tensor& qx, const Tensor& qy, const Grid& g) {
+  return nearest(qy, g.height) * g.width + nearest(qx, g.width);
+}
+
+Tensor lost(const Tensor& positions) {
+  return torch::isnan(positions[0]) | torch::isnan(positions[1]);
+}
+
+// reprojectNearest: zeros where the position is lost.
+Tensor reprojectNearest(const Tensor& source, const Tensor& positions, const Grid& g) {
+  const Tensor moved = source.index_select(1, nearestPixel(positions[0], positions[1], g));
+  return zerosWhere(~lost(positions), moved);
+}
+
+// motion::chainPositions along `chain` (the centre first).
+Tensor chainPositions(const std::vector<const DeviceFrame*>& chain, bool forward,
+                      const motion::TrustOptions& options, const Grid& g) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  Tensor qx = g.x, qy = g.y;
+  const double limit = options.roundTripPixels * options.roundTripPixels;
+  for (std::size_t hop = 0; hop + 1 < chain.size(); ++hop) {
+    const Tensor& there = forward ? chain[hop]->toNext : chain[hop]->toPrevious;
+    const Tensor offset = there.index_select(1, nearestPixel(qx, qy, g));
+    const Tensor nx = qx + offset[0], ny = qy + offset[1];
+    const Tensor onScreen =
+        (nx >= -0.5f) & (ny >= -0.5f) & (nx <= g.width - 0.5f) & (ny <= g.height - 0.5f);
+    // The neighbour's own motion back must return here (else an occluder).
+    const Tensor& back = forward ? chain[hop + 1]->toPrevious : chain[hop + 1]->toNext;
+    const Tensor ret = back.index_select(1, nearestPixel(nx, ny, g));
+    const Tensor ex = nx + ret[0] - qx, ey = ny + ret[1] - qy;
+    const Tensor kept = onScreen & ~((ex * ex + ey * ey).to(torch::kDouble) > limit);
+    qx = torch::where(kept, nx, torch::full_like(nx, nan));
+    qy = torch::where(kept, ny, torch::full_like(ny, nan));
+  }
+  return torch::stack({qx, qy});
+}
+
+// The centre's guides at every pixel within `neighbourhood` of each pixel:
+// (channels, offsets, pixels), and which offsets lie on the image. A tap
+// passes a guide's test where it passes it at any of them (reproject.cpp's
+// matchesAround).
+struct GuidesAround {
+  Tensor depth, normal, normalLength, albedo;
+  Tensor valid;        // (offsets, pixels)
+  Tensor environment;  // per pixel: showsEnvironment
+};
+
+Tensor normalLength(const Tensor& normal) {
+  return torch::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
+}
+
+GuidesAround guidesAround(const DeviceFrame& frame, int r, const Grid& g) {
+  std::vector<Tensor> indices, valid;
+  const Tensor x = g.x.to(torch::kLong), y = g.y.to(torch::kLong);
+  for (int dy = -r; dy <= r; ++dy)
+    for (int dx = -r; dx <= r; ++dx) {
+      const Tensor ox = x + dx, oy = y + dy;
+      valid.push_back((ox >= 0) & (oy >= 0) & (ox < g.width) & (oy < g.height));
+      indices.push_back(oy.clamp(0, g.height - 1) * g.width + ox.clamp(0, g.width - 1));
+    }
+  const Tensor index = torch::stack(indices).reshape(-1);
+  const auto offsets = std::int64_t(indices.size());
+  auto around = [&](const Tensor& guide) {
+    return guide.defined() ? guide.index_select(1, index).view({guide.size(0), offsets, -1})
+                           : Tensor();
+  };
+  GuidesAround out{around(frame.depth),  around(frame.normal), Tensor(),
+                   around(frame.albedo), torch::stack(valid),  Tensor()};
+  if (out.normal.defined()) out.normalLength = normalLength(out.normal);
+  out.environment = frame.depth.defined()
+                        ? (frame.depth[0] == 0) | ~(frame.depth[0].abs() < 1e9f)
+                        : torch::zeros({g.pixels()}, frame.denoised.options().dtype(torch::kBool));
+  return out;
+}
+
+// Per pixel, whether the source's guides at `tap` pass each test at some
+// pixel around the destination (reproject.cpp's sameSurface): each test its
+// own, as a tap may match the depth at one such pixel and the normal at another.
+Tensor sameSurface(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
+                   const motion::TrustOptions& o, bool byAlbedo) {
+  Tensor passes = torch::ones_like(around.environment);
+  if (source.depth.defined() && around.depth.defined()) {
+    const Tensor zs = source.depth.index_select(1, tap).unsqueeze(1), zc = around.depth;
+    passes =
+        passes &
+        (around.valid & ((zs - zc).abs() <= o.depthRelative * zc.abs().clamp_min(1e-6f))[0]).any(0);
+  }
+  if (source.normal.defined() && around.normal.defined()) {
+    const Tensor ns = source.normal.index_select(1, tap).unsqueeze(1), nc = around.normal;
+    const Tensor ls = normalLength(ns), lc = around.normalLength;
+    const Tensor dot = ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2];
+    const Tensor background = ls < 1e-3f;
+    const Tensor same =
+        (background == (lc < 1e-3f)) & (background | (dot >= o.normalCosine * ls * lc));
+    passes = passes & (around.valid & same).any(0);
+  }
+  if (byAlbedo && source.albedo.defined() && around.albedo.defined()) {
+    const Tensor as = source.albedo.index_select(1, tap).unsqueeze(1), ac = around.albedo;
+    const Tensor close =
+        ((as - ac).abs() <= o.albedoAbsolute + o.albedoRelative * torch::max(as, ac)).all(0);
+    passes = passes & (around.valid & close).any(0);
+  }
+  return passes;
+}
+
+// The 4 x 4 taps around a position: tap (i, j) at floor(q) - 1 + (i, j).
+struct Taps {
+  Tensor x0, y0;  // floor(q), long
+  Tensor fx, fy;  // q - floor(q)
+  Tensor usable;  // the position is not lost
+  Tensor index(int i, int j, const Grid& g) const {
+    return (y0 - 1 + j).clamp(0, g.height - 1) * g.width + (x0 - 1 + i).clamp(0, g.width - 1);
+  }
+  Tensor inside(int i, int j, const Grid& g) const {
+    const Tensor x = x0 - 1 + i, y = y0 - 1 + j;
+    return (x >= 0) & (y >= 0) & (x < g.width) & (y < g.height);
+  }
+  // Bilinear tap t (0-3): (t & 1, t >> 1) from floor(q); weight 0 off the image.
+  Tensor bilinearWeight(int t, const Grid& g) const {
+    const Tensor w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
+    return zerosWhere(usable & inside(1 + (t & 1), 1 + (t >> 1), g) & (w > 0), w);
+  }
+};
+
+Taps tapsOf(const Tensor& positions) {
+  const Tensor usable = ~lost(positions);
+  const Tensor qx = torch::nan_to_num(positions[0], 0.0), qy = torch::nan_to_num(positions[1], 0.0);
+  const Tensor fx0 = torch::floor(qx), fy0 = torch::floor(qy);
+  return {fx0.to(torch::kLong), fy0.to(torch::kLong), qx - fx0, qy - fy0, usable};
+}
+
+// motion::planResampling on the device.
+DeviceResampling planResampling(const DeviceFrame& source, const Tensor& positions,
+                                const GuidesAround& around, const motion::TrustOptions& o,
+                                const Grid& g) {
+  const Taps taps = tapsOf(positions);
+  Tensor accepted = torch::zeros({g.pixels()}, positions.options().dtype(torch::kDouble));
+  Tensor bits = torch::zeros({g.pixels()}, positions.options().dtype(torch::kInt));
+  for (int t = 0; t < 4; ++t) {
+    const Tensor weight = taps.bilinearWeight(t, g);
+    const Tensor index = taps.index(1 + (t & 1), 1 + (t >> 1), g);
+    const Tensor matched = (weight > 0) & sameSurface(source, index, around, o, true);
+    accepted = accepted + zerosWhere(matched, weight.to(torch::kDouble));
+    bits = bits | zerosWhere(matched, torch::full_like(bits, 1 << t));
+  }
+  const Tensor brought = taps.usable & ~around.environment & (accepted >= o.minCoverage);
+  Tensor cubic = torch::zeros_like(brought);
+  if (o.cubic) {
+    // Where every bilinear tap matched, the sharper cubic where all 16 of its
+    // taps lie on the image and show the destination's surface.
+    const Tensor whole = ((taps.fx == 0) | (taps.fx == 1)) & ((taps.fy == 0) | (taps.fy == 1));
+    cubic = brought & ~whole & (accepted > 0.999) & taps.inside(0, 0, g) & taps.inside(3, 3, g);
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 4; ++i)
+        cubic = cubic & sameSurface(source, taps.index(i, j, g), around, o, false);
+  }
+  bits = bits | zerosWhere(cubic, torch::full_like(bits, kCubicTaps));
+  bits = zerosWhere(brought, bits | kBroughtIn);
+  const Tensor trust = zerosWhere(brought, accepted.clamp_max(1.0)).to(torch::kFloat);
+  return {positions, bits.to(torch::kUInt8), trust};
+}
+
+// Catmull-Rom's weights of the taps at offsets -1, 0, 1, 2 from floor(q).
+std::vector<Tensor> catmullRom(const Tensor& t) {
+  const Tensor t2 = t * t, t3 = t2 * t;
+  return {0.5f * (-t3 + 2 * t2 - t), 0.5f * (3 * t3 - 5 * t2 + 2), 0.5f * (-3 * t3 + 4 * t2 + t),
+          0.5f * (t3 - t2)};
+}
+
+// motion::resample on the device: `source` (any channels) brought in by `plan`.
+Tensor resample(const DeviceResampling& plan, const Tensor& source, const Grid& g) {
+  const Taps taps = tapsOf(plan.positions);
+  const Tensor bits = plan.taps.to(torch::kInt);
+  Tensor sum = torch::zeros({source.size(0), g.pixels()}, source.options());
+  Tensor accepted = torch::zeros({g.pixels()}, source.options());
+  for (int t = 0; t < 4; ++t) {
+    const Tensor used = (bits & (1 << t)) != 0;
+    const Tensor weight = zerosWhere(used, taps.bilinearWeight(t, g));
+    accepted = accepted + weight;
+    sum = sum + weight * source.index_select(1, taps.index(1 + (t & 1), 1 + (t >> 1), g));
+  }
+  const Tensor brought = (bits & kBroughtIn) != 0;
+  Tensor out =
+      zerosWhere(brought, sum / torch::where(brought, accepted, torch::ones_like(accepted)));
+  const Tensor cubicTaps = (bits & kCubicTaps) != 0;
+  // reproject.cpp's cubic takes at most 8 channels.
+  if (source.size(0) > 8 || !cubicTaps.any().item<bool>()) return out;
+  // The 16-tap gather: where a channel would be negative (an overshoot at a
+  // dark edge), the bilinear value stays.
+  const std::vector<Tensor> wx = catmullRom(taps.fx), wy = catmullRom(taps.fy);
+  Tensor cubic = torch::zeros_like(sum);
+  for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i)
+      cubic = cubic + (wx[i] * wy[j]) * source.index_select(1, taps.index(i, j, g));
+  const Tensor sharper = cubicTaps & (cubic >= 0).all(0);
+  return torch::where(sharper, cubic, out);
+}
+
+// Per pixel, how still the surface stood: 1 where it did not move, 0 from `pixels` on.
+Tensor movedPixels(const Tensor& positions, const Grid& g) {
+  return torch::hypot(positions[0] - g.x, positions[1] - g.y);
+}
+
+Tensor stillness(const Tensor& positions, double pixels, const Grid& g) {
+  const Tensor moved = movedPixels(positions, g);
+  return zerosWhere(moved < pixels, 1.0f - moved / float(pixels));
+}
+
+// The centre frame's view for the tests, computed once a frame.
+struct Centre {
+  const DeviceFrame* frame;
+  Grid grid;
+  Tensor scale;                          // its autoexposure, 0-d
+  Tensor mapped, noisyMapped, residual;  // its result and render tonemapped; their difference
+  Tensor noise;                          // the residual's local level, floored
+  GuidesAround around;
+};
+
+Tensor localNoise(const Tensor& residual, int r, const Grid& g) {
+  return torch::sqrt(boxMean((residual * residual).mean(0, true), r, g))[0];
+}
+
+// The k-th smallest (1-based) of `values`.
+Tensor kth(const Tensor& values, std::int64_t k) { return std::get<0>(torch::kthvalue(values, k)); }
+
+Centre centreOf(const DeviceFrame& frame, const motion::TrustOptions& trust) {
+  Centre c{&frame, gridOf(frame), {}, {}, {}, {}, {}, {}};
+  c.scale = exposureOf(frame.denoised, frame.width, frame.height);
+  c.mapped = tonemapped(frame.denoised, c.scale);
+  c.noisyMapped = tonemapped(frame.noisy, c.scale);
+  c.residual = c.noisyMapped - c.mapped;
+  c.noise = localNoise(c.residual, 3, c.grid);
+  // A floor: flat, noise-free regions (a clear sky) must not divide by zero.
+  const Tensor median = kth(c.noise, c.noise.numel() / 2 + 1);
+  c.noise = torch::maximum(c.noise, (0.1f * median).clamp_min(1e-4f));
+  c.around = guidesAround(frame, trust.neighbourhood, c.grid);
+  return c;
+}
+
+// Correlation of two residuals over the pixels where `trust` > 0 (host: a verdict).
+double correlation(const Tensor& a, const Tensor& b, const Tensor& trust) {
+  const Tensor mask = (trust > 0).to(torch::kDouble);
+  const Tensor u = a.to(torch::kDouble) * mask, v = b.to(torch::kDouble);
+  const Tensor sums = torch::stack({(u * v).sum(), (u * u).sum(), (v * v * mask).sum()}).cpu();
+  const double ab = sums[0].item<double>(), aa = sums[1].item<double>(),
+               bb = sums[2].item<double>();
+  return aa > 0.0 && bb > 0.0 ? ab / std::sqrt(aa * bb) : 0.0;
+}
+
+// The spread of the leftover errors from the lower quartile of `d` over trusted pixels.
+double robustSpread(const Tensor& d, const Tensor& trust) {
+  const Tensor values = d.masked_select(trust > 0);
+  if (values.numel() == 0) return 0.0;
+  return kth(values, values.numel() / 4 + 1).item<double>() / 0.3186;
+}
+
+Tensor normalisedDifference(const Centre& centre, const Tensor& image) {
+  return absoluteDifference(tonemapped(image, centre.scale), centre.mapped) / centre.noise;
+}
+
+// Per pixel and channel, the mean of `image` over the box's trusted pixels; -1 where none.
+Tensor trustedBoxMean(const Tensor& image, const Tensor& trusted, int r, const Grid& g) {
+  const Tensor count = boxCount(trusted.unsqueeze(0), r, g);
+  const Tensor sums = boxSum(image * trusted.to(torch::kFloat), r, g);
+  return torch::where(count > 0, sums / count.clamp_min(1), torch::full_like(sums, -1.0f));
+}
+
+Tensor relightFactor(const Tensor& moved, const Tensor& own, const Tensor& trust, int r,
+                     const Grid& g) {
+  const Tensor a = trustedBoxMean(own, trust > 0, r, g), b = trustedBoxMean(moved, trust > 0, r, g);
+  return torch::where((a >= 0) & (b > 1e-6f), (a / b).clamp(0.1f, 10.0f), torch::ones_like(a));
+}
+
+// The renders' light test: per pixel, standard errors of the box means' difference.
+Tensor lightChange(const Tensor& current, const Tensor& moved, const Tensor& trust,
+                   const Tensor& currentResidual, const Tensor& movedResidual, int r,
+                   const Grid& g) {
+  const Tensor mask = (trust > 0).to(torch::kFloat);
+  const Tensor difference = (moved - current).mean(0) * mask;
+  const Tensor variance =
+      (currentResidual * currentResidual + movedResidual * movedResidual).sum(0) / 9.0f * mask;
+  const Tensor sums = boxSum(torch::stack({mask, difference, variance}), r, g);
+  const Tensor n = torch::round(sums[0]), d = sums[1], v = sums[2];
+  const Tensor defined = (n >= 1) & (v > 0);
+  const Tensor safeN = n.clamp_min(1), safeV = torch::where(defined, v, torch::ones_like(v));
+  return zerosWhere(defined, (d / safeN).abs() / (torch::sqrt(safeV) / safeN));
+}
+
+struct Contribution {
+  enum class Verdict { Used, Relit, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
+  Tensor image, history, historyWeight;
+  DeviceResampling resampling;
+  Tensor relight, lightChange, weight;
+  double spread = 0.0, fullSpread = 0.0;
+  bool used() const { return weight.defined(); }
+};
+
+Contribution contributionOf(const Centre& centre, const DeviceFrame& neighbour,
+                            const std::vector<const DeviceFrame*>& chain, bool forward,
+                            const TemporalOptions& options) {
+  const Grid& g = centre.grid;
+  Contribution out;
+  const Tensor positions = chainPositions(chain, forward, options.trust, g);
+  // Only the past carries a denoised history (a frame's result must not
+  // depend on how far its successors have got); it counts where the surface
+  // stood still, which pastHistoriesOf weighs.
+  const bool withHistory = !forward && neighbour.history.defined();
+  DeviceResampling plan = planResampling(neighbour, positions, centre.around, options.trust, g);
+  Tensor moved = resample(
+      plan, withHistory ? torch::cat({neighbour.denoised, neighbour.history}) : neighbour.denoised,
+      g);
+  if (withHistory) {
+    out.history = moved.slice(0, 3, 6);
+    out.historyWeight = stillness(positions, options.historyMotion, g);
+    moved = moved.slice(0, 0, 3);
+  }
+  const Tensor& trust = plan.trust;
+  const Tensor neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
+  const Tensor residual =
+      reprojectNearest(neighbourNoisy - tonemapped(neighbour.denoised, centre.scale), positions, g);
+  if (correlation(centre.residual, residual, trust) > options.repeatedNoiseCorrelation) {
+    out.verdict = Contribution::Verdict::RepeatedNoise;
+    return out;
+  }
+  out.image = moved;
+  double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
+  // A change of light over most of the frame: relit first, left out whole
+  // if that does not bring the spread down (temporal_filter.cpp).
+  if (fullSpread > options.changedLightSpread) {
+    out.relight = relightFactor(out.image, centre.frame->denoised, trust, options.relightBox, g);
+    out.image = out.image * out.relight;
+    if (out.history.defined()) out.history = out.history * out.relight;
+    fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
+    if (fullSpread > options.changedLightSpread) {
+      out.verdict = Contribution::Verdict::ChangedLight;
+      return out;
+    }
+    out.verdict = Contribution::Verdict::Relit;
+  }
+  out.fullSpread = fullSpread;
+  out.spread = std::min(fullSpread, options.maxSpread);
+  // The renders' own light test would see the change that relighting undid.
+  if (out.relight.defined()) {
+    out.weight = trust.clone();
+    out.resampling = std::move(plan);
+    return out;
+  }
+  out.lightChange = lightChange(centre.noisyMapped, reprojectNearest(neighbourNoisy, positions, g),
+                                trust, centre.residual, residual, options.lightBox, g);
+  out.weight =
+      trust * ((options.lightHigh - out.lightChange) / (options.lightHigh - options.lightLow))
+                  .clamp(0.0, 1.0);
+  out.resampling = std::move(plan);
+  return out;
+}
+
+struct Weighted {
+  const Tensor* image;
+  const Tensor* weight;
+};
+
+// The frame's own (weight 1) and the others, weighted per pixel: the mean and the total weight.
+std::pair<Tensor, Tensor> weightedMean(const Tensor& own, const std::vector<Weighted>& others) {
+  Tensor sum = own.clone(), total = torch::ones({own.size(1)}, own.options());
+  for (const Weighted& k : others) {
+    const Tensor w = zerosWhere(*k.weight > 0, *k.weight);
+    sum = sum + w * *k.image;
+    total = total + w;
+  }
+  return {sum / total, total};
+}
+
+std::vector<Weighted> usedOf(const std::vector<Contribution>& contributions) {
+  std::vector<Weighted> out;
+  for (const Contribution& k : contributions)
+    if (k.used()) out.push_back({&k.image, &k.weight});
+  return out;
+}
+
+// The colour test (applyColourTest of temporal_filter.cpp).
+void applyColourTest(Contribution& k, const Tensor& referenceMapped, const Centre& centre,
+                     const TemporalOptions& options) {
+  if (!k.used() || k.spread <= 0.0) return;
+  const Tensor z = absoluteDifference(tonemapped(k.image, centre.scale), referenceMapped) /
+                   centre.noise / float(k.spread);
+  const Tensor factor =
+      ((options.colourHigh - z) / (options.colourHigh - options.colourLow)).clamp(0.0, 1.0);
+  k.weight = torch::where(k.weight > 0, k.weight * factor, k.weight);
+}
+
+// The frame's result and every kept neighbour's, weighted by the guides'
+// trust alone, tonemapped: what the learned trust compares each with.
+Tensor guideMean(const Centre& centre, const std::vector<Contribution>& contributions) {
+  std::vector<Weighted> others;
+  for (const Contribution& k : contributions)
+    if (k.used()) others.push_back({&k.image, &k.resampling.trust});
+  return tonemapped(weightedMean(centre.frame->denoised, others).first, centre.scale);
+}
+
+// Per pixel, the learned trust's view of neighbour `k`: (pixels, kTrustFeatureCount).
+Tensor trustFeatures(const Centre& centre, const Contribution& k, const Tensor& meanMapped,
+                     int distance, bool forward) {
+  const Grid& g = centre.grid;
+  const Tensor mapped = tonemapped(k.image, centre.scale);
+  const Tensor toOwn = absoluteDifference(mapped, centre.mapped) / centre.noise;
+  const Tensor toMean = absoluteDifference(mapped, meanMapped) / centre.noise;
+  const Tensor moved = movedPixels(k.resampling.positions, g);
+  auto constant = [&](double v) { return torch::full_like(toOwn, float(v)); };
+  std::vector<Tensor> f(kTrustFeatureCount);
+  f[kGuideTrust] = k.resampling.trust;
+  f[kOwnDifference] = torch::log1p(toOwn);
+  f[kOwnDifferenceBox] = torch::log1p(boxMean(toOwn.unsqueeze(0), 1, g)[0]);
+  f[kMeanDifference] = torch::log1p(toMean);
+  f[kLightChange] = k.lightChange.defined() ? torch::log1p(k.lightChange) : constant(0.0);
+  f[kMotion] = zerosWhere(torch::isfinite(moved),
+                          torch::log1p(torch::nan_to_num(moved, 0.0).clamp_max(1e3f)));
+  f[kDistance] = constant(distance / 4.0);
+  f[kNoiseLevel] = torch::log(centre.noise);
+  f[kSpread] = constant(std::min(k.fullSpread, 3.0));
+  f[kRelit] = constant(k.relight.defined() ? 1.0 : 0.0);
+  f[kBrightness] = centre.mapped.mean(0);
+  f[kFuture] = constant(forward ? 1.0 : 0.0);
+  return torch::stack(f, 1);
+}
+
+// LearnedTrust::weigh over every pixel: its layers as matrix products.
+Tensor weighAll(const LearnedTrust& trust, const Tensor& features) {
+  const std::vector<int>& sizes = trust.sizes();
+  const Tensor params = torch::tensor(trust.params()).to(features.device());
+  Tensor x = features;
+  std::int64_t at = 0;
+  for (std::size_t l = 1; l < sizes.size(); ++l) {
+    const std::int64_t n = sizes[l - 1], m = sizes[l];
+    const Tensor weights = params.slice(0, at, at + n * m).view({m, n});
+    const Tensor bias = params.slice(0, at + n * m, at + n * m + m);
+    x = torch::addmm(bias, x, weights.t());
+    if (l + 1 < sizes.size()) x = torch::relu(x);
+    at += n * m + m;
+  }
+  return torch::sigmoid(x.squeeze(1));
+}
+
+void applyLearnedTrust(Contribution& k, const Tensor& features, const LearnedTrust& trust) {
+  const Tensor w = weighAll(trust, features);
+  // NaN (a feature of a NaN render): 0.
+  k.weight = torch::where(k.weight > 0, zerosWhere(w > 0, k.weight * w), k.weight);
+}
+
+// The noisy renders accumulated with the results' weights, at the nearest pixel.
+void accumulateNoisy(const Centre& centre, const std::vector<const DeviceFrame*>& frames,
+                     const std::vector<Contribution>& contributions, DeviceTemporalResult& result) {
+  const Grid& g = centre.grid;
+  Tensor sum = centre.frame->noisy.clone();
+  Tensor weight = torch::ones({g.pixels()}, sum.options()), squares = weight.clone();
+  for (std::size_t k = 0; k < contributions.size(); ++k) {
+    const Contribution& c = contributions[k];
+    if (!c.used()) continue;
+    Tensor moved = reprojectNearest(frames[k]->noisy, c.resampling.positions, g);
+    if (c.relight.defined()) moved = moved * c.relight;
+    const Tensor w = zerosWhere(c.weight > 0, c.weight);
+    sum = sum + w * moved;
+    weight = weight + w;
+    squares = squares + w * w;
+  }
+  result.history = sum / weight;
+  result.historyFrames = (weight * weight / squares).unsqueeze(0);
+  result.stats.accumulatedFrames = result.historyFrames.mean(torch::kDouble).item<double>();
+}
+
+DevicePastHistories pastHistoriesOf(const std::vector<Contribution>& contributions,
+                                    const Centre& centre) {
+  DevicePastHistories out;
+  for (const Contribution& k : contributions) {
+    if (!k.history.defined() || !k.used()) continue;
+    const Tensor weight = k.weight * k.historyWeight;
+    if (!(weight > 0).any().item<bool>()) continue;
+    out.images.push_back(k.history);
+    out.weights.push_back(weight);
+  }
+  if (!out.empty()) out.scale = centre.scale, out.noise = centre.noise;
+  return out;
+}
+
+// The neighbours in order (the past nearest first, then the future), each
+// with the chain of frames its motion is followed along; a gap ends a side.
+struct Neighbour {
+  const DeviceFrame* frame;
+  std::size_t index;
+  std::vector<const DeviceFrame*> chain;
+  bool forward;
+};
+
+std::vector<Neighbour> neighboursOf(const std::vector<const DeviceFrame*>& window,
+                                    std::size_t centre, int radius) {
+  const DeviceFrame& current = *window[centre];
+  std::vector<Neighbour> out;
+  for (int side : {-1, 1}) {
+    std::vector<const DeviceFrame*> chain = {&current};
+    for (int k = 1; k <= radius; ++k) {
+      const long index = static_cast<long>(centre) + side * k;
+      if (index < 0 || index >= static_cast<long>(window.size()) || !window[index]) break;
+      const DeviceFrame& frame = *window[index];
+      if (!frame.hasMotion() || !current.hasMotion()) break;
+      if (frame.width != current.width || frame.height != current.height ||
+          frame.toNext.size(1) != current.toNext.size(1))
+        throw std::invalid_argument("filterFrame: every frame needs motion of the same size");
+      chain.push_back(&frame);
+      out.push_back({&frame, static_cast<std::size_t>(index), chain, side > 0});
+    }
+  }
+  return out;
+}
+
+// The per-neighbour shares of trusted pixels and the history's share, in one copy to the host.
+void countTrusted(const std::vector<Contribution>& contributions, const Tensor& totalWeight,
+                  TemporalStats& stats) {
+  std::vector<Tensor> counts;
+  for (const Contribution& k : contributions)
+    counts.push_back(k.used() ? (k.weight > 0).sum().to(torch::kDouble)
+                              : torch::zeros({}, totalWeight.options().dtype(torch::kDouble)));
+  counts.push_back((1.0 - 1.0 / totalWeight.to(torch::kDouble)).sum());
+  const Tensor host = torch::stack(counts).cpu();
+  const double pixels = double(totalWeight.numel());
+  for (std::size_t k = 0; k < contributions.size(); ++k)
+    stats.trusted.push_back(host[k].item<double>() / pixels);
+  stats.historyShare = host[contributions.size()].item<double>() / std::max(1.0, pixels);
+}
+
+// TrustSamples on the host for options.observeTrust.
+void observe(const Centre& centre, const std::vector<Neighbour>& neighbours,
+             const std::vector<Contribution>& contributions, const std::vector<Tensor>& features,
+             const TemporalOptions& options) {
+  const Grid& g = centre.grid;
+  TrustSamples samples{pixelsToImage(centre.frame->denoised, g.width, g.height),
+                       centre.scale.item<double>(),
+                       {},
+                       {},
+                       {},
+                       {}};
+  for (std::size_t n = 0; n < contributions.size(); ++n) {
+    if (!features[n].defined()) continue;
+    samples.frames.push_back(neighbours[n].index);
+    samples.moved.push_back(pixelsToImage(contributions[n].image, g.width, g.height));
+    const Tensor f = features[n].contiguous().cpu();
+    samples.features.emplace_back(f.data_ptr<float>(), f.data_ptr<float>() + f.numel());
+    const Tensor w = contributions[n].weight.to(torch::kDouble).contiguous().cpu();
+    samples.weights.emplace_back(w.data_ptr<double>(), w.data_ptr<double>() + w.numel());
+  }
+  options.observeTrust(samples);
+}
+
+std::vector<double> toDoubles(const Tensor& t) {
+  const Tensor host = t.to(torch::kDouble).contiguous().cpu();
+  return {host.data_ptr<double>(), host.data_ptr<double>() + host.numel()};
+}
+
+}  // namespace
+
+torch::Tensor pixelsToDevice(const Image& image, const torch::Device& device) {
+  if (image.empty()) return {};
+  return imageToDevice(image, device).reshape({image.channels, -1}).contiguous();
+}
+
+Image pixelsToImage(const torch::Tensor& pixels, int width, int height) {
+  return tensorToImage(pixels.reshape({1, -1, height, width}));
+}
+
+DeviceFrame toDevice(const WindowFrame& frame, const torch::Device& device) {
+  DeviceFrame out;
+  out.width = frame.denoised.width, out.height = frame.denoised.height;
+  out.denoised = pixelsToDevice(frame.denoised, device);
+  out.noisy = pixelsToDevice(frame.noisy, device);
+  out.history = pixelsToDevice(frame.history, device);
+  out.albedo = pixelsToDevice(frame.guides.albedo, device);
+  out.normal = pixelsToDevice(frame.guides.normal, device);
+  out.depth = pixelsToDevice(frame.guides.depth, device);
+  if (!frame.motion.empty()) {
+    out.toPrevious = pixelsToDevice(frame.motion.toPrevious, device);
+    out.toNext = pixelsToDevice(frame.motion.toNext, device);
+  }
+  return out;
+}
+
+motion::Resampling DeviceResampling::toHost(int width, int height) const {
+  motion::Resampling out;
+  out.positions = pixelsToImage(positions, width, height);
+  out.trust = pixelsToImage(trust.unsqueeze(0), width, height);
+  const Tensor bits = taps.contiguous().cpu();
+  out.taps.assign(bits.data_ptr<std::uint8_t>(), bits.data_ptr<std::uint8_t>() + bits.numel());
+  return out;
+}
+
+FilterWeights DeviceFilterWeights::toHost() const {
+  FilterWeights out;
+  out.centre = centre;
+  out.relightBox = relightBox;
+  for (const DeviceNeighbourWeights& nb : neighbours)
+    out.neighbours.push_back(
+        {nb.frame, nb.resampling.toHost(width, height), nb.relit, toDoubles(nb.weight)});
+  return out;
+}
+
+DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, std::size_t centre,
+                                 const TemporalOptions& options) {
+  if (centre >= window.size() || !window[centre])
+    throw std::invalid_argument("filterFrame: the centre frame is missing");
+  torch::NoGradGuard noGrad;
+  const DeviceFrame& current = *window[centre];
+  const std::vector<Neighbour> neighbours = neighboursOf(window, centre, options.radius);
+  const Centre c = centreOf(current, options.trust);
+  std::vector<Contribution> contributions;
+  for (const Neighbour& nb : neighbours)
+    contributions.push_back(contributionOf(c, *nb.frame, nb.chain, nb.forward, options));
+  // The learned trust's view of each neighbour, where it or an observer needs it.
+  std::vector<Tensor> features(contributions.size());
+  if (options.learnedTrust || options.observeTrust) {
+    const Tensor meanMapped = guideMean(c, contributions);
+    for (std::size_t n = 0; n < contributions.size(); ++n) {
+      if (!contributions[n].used()) continue;
+      const long distance = std::labs(long(neighbours[n].index) - long(centre));
+      features[n] =
+          trustFeatures(c, contributions[n], meanMapped, int(distance), neighbours[n].forward);
+    }
+  }
+  const Tensor ownMean = weightedMean(current.denoised, usedOf(contributions)).first;
+  const Tensor referenceMapped =
+      tonemapped((1.0f - float(options.colourReference)) * current.denoised +
+                     float(options.colourReference) * ownMean,
+                 c.scale);
+  for (std::size_t n = 0; n < contributions.size(); ++n) {
+    applyColourTest(contributions[n], referenceMapped, c, options);
+    if (options.learnedTrust && features[n].defined())
+      applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
+  }
+  if (options.observeTrust) observe(c, neighbours, contributions, features, options);
+
+  DeviceTemporalResult result;
+  Tensor totalWeight;
+  std::tie(result.color, totalWeight) = weightedMean(current.denoised, usedOf(contributions));
+  result.stats.neighbours = static_cast<int>(neighbours.size());
+  for (const Contribution& k : contributions) {
+    result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
+    result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
+    result.stats.relit += k.verdict == Contribution::Verdict::Relit;
+  }
+  countTrusted(contributions, totalWeight, result.stats);
+  if (options.accumulatedShare > 0.0) {
+    std::vector<const DeviceFrame*> frames;
+    for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
+    accumulateNoisy(c, frames, contributions, result);
+    result.pastHistories = pastHistoriesOf(contributions, c);
+  }
+  DeviceFilterWeights& weights = result.weights;
+  weights.centre = centre;
+  weights.relightBox = options.relightBox;
+  weights.width = current.width, weights.height = current.height;
+  for (std::size_t k = 0; k < contributions.size(); ++k) {
+    Contribution& n = contributions[k];
+    if (!n.used()) continue;
+    weights.neighbours.push_back(
+        {neighbours[k].index, std::move(n.resampling), n.relight.defined(), std::move(n.weight)});
+  }
+  return result;
+}
+
+torch::Tensor filterWith(const DeviceFilterWeights& weights,
+                         const std::vector<const torch::Tensor*>& images) {
+  if (weights.centre >= images.size() || !images[weights.centre])
+    throw std::invalid_argument("filterWith: the centre frame's image is missing");
+  torch::NoGradGuard noGrad;
+  const Tensor& own = *images[weights.centre];
+  const Grid g{weights.width, weights.height, {}, {}};
+  std::vector<Tensor> moved;
+  std::vector<const DeviceNeighbourWeights*> used;
+  for (const DeviceNeighbourWeights& nb : weights.neighbours) {
+    const Tensor* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
+    if (!image || !image->defined() || image->sizes() != own.sizes()) continue;
+    Tensor in = resample(nb.resampling, *image, g);
+    if (nb.relit) in = in * relightFactor(in, own, nb.resampling.trust, weights.relightBox, g);
+    moved.push_back(in);
+    used.push_back(&nb);
+  }
+  std::vector<Weighted> others;
+  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]->weight});
+  return weightedMean(own, others).first;
+}
+
+torch::Tensor historyMean(const torch::Tensor& own, const DeviceTemporalResult& result,
+                          const TemporalOptions& options) {
+  const DevicePastHistories& past = result.pastHistories;
+  if (past.empty()) return own;
+  torch::NoGradGuard noGrad;
+  for (const Tensor& image : past.images)
+    if (image.sizes() != own.sizes())
+      throw std::invalid_argument("historyMean: the images differ in shape");
+  // Each counts where it differs from the frame's own by less than the noise
+  // its accumulated render still had (historyMean of temporal_filter.cpp).
+  const Tensor ownMapped = tonemapped(own, past.scale);
+  const Tensor error = past.noise * torch::sqrt(2.0f / result.historyFrames[0]);
+  std::vector<Tensor> weights;
+  for (std::size_t k = 0; k < past.images.size(); ++k) {
+    const Tensor d = absoluteDifference(tonemapped(past.images[k], past.scale), ownMapped);
+    weights.push_back(
+        past.weights[k] *
+        ((options.lightHigh - d / error) / (options.lightHigh - options.lightLow)).clamp(0.0, 1.0));
+  }
+  std::vector<Weighted> others;
+  for (std::size_t k = 0; k < weights.size(); ++k) others.push_back({&past.images[k], &weights[k]});
+  return weightedMean(own, others).first;
+}
+
+torch::Tensor blendWithHistory(const torch::Tensor& filtered, const torch::Tensor& accumulated,
+                               double share) {
+  if (filtered.sizes() != accumulated.sizes())
+    throw std::invalid_argument("blendWithHistory: the images differ in shape");
+  return (1.0f - float(share)) * filtered + float(share) * accumulated;
+}
+
+TemporalResult toHost(const DeviceTemporalResult& result, bool withWeights) {
+  const int w = result.weights.width, h = result.weights.height;
+  TemporalResult out;
+  out.color = pixelsToImage(result.color, w, h);
+  if (withWeights) out.weights = result.weights.toHost();
+  if (result.history.defined()) {
+    out.history = pixelsToImage(result.history, w, h);
+    out.historyFrames = pixelsToImage(result.historyFrames, w, h);
+  }
+  const DevicePastHistories& past = result.pastHistories;
+  for (std::size_t k = 0; k < past.images.size(); ++k) {
+    out.pastHistories.images.push_back(pixelsToImage(past.images[k], w, h));
+    out.pastHistories.weights.push_back(toDoubles(past.weights[k]));
+  }
+  if (!past.empty()) {
+    out.pastHistories.scale = past.scale.item<double>();
+    const Tensor noise = past.noise.contiguous().cpu();
+    out.pastHistories.noise.assign(noise.data_ptr<float>(),
+                                   noise.data_ptr<float>() + noise.numel());
+  }
+  out.stats = result.stats;
+  return out;
+}
+
+}  // namespace dn::temporal
