@@ -150,12 +150,12 @@ struct Both {
 };
 
 Both filterBoth(const std::vector<const WindowFrame*>& window, std::size_t centre,
-                const TemporalOptions& options = {}) {
+                const TemporalOptions& options = {}, const torch::Device& device = kCpu) {
   Both out;
   out.frames.reserve(window.size());
   std::vector<const DeviceFrame*> onDevice;
   for (const WindowFrame* f : window) {
-    if (f) out.frames.push_back(toDevice(*f, kCpu));
+    if (f) out.frames.push_back(toDevice(*f, device));
     onDevice.push_back(f ? &out.frames.back() : nullptr);
   }
   out.device = filterFrame(onDevice, centre, options);
@@ -373,6 +373,26 @@ TEST_CASE("device filter: motion of another size throws as on the CPU") {
                     c = toDevice(frames[2], kCpu);
   CHECK_THROWS_AS(filterFrame({&a, &b, &c}, 1), std::invalid_argument);
   CHECK_THROWS_AS(filterFrame({&a, nullptr, &c}, 1), std::invalid_argument);
+}
+
+// The same windows on a GPU, where this LibTorch and machine have one
+// (bench/gpu/check_cuda.sh runs this test there).
+TEST_CASE("device filter: on CUDA as on the CPU" *
+          doctest::skip(!torch::cuda::is_available())) {
+  const torch::Device cuda(torch::kCUDA);
+  const std::vector<WindowFrame> still = shot(5, 0.0f, 0, 0, 100);
+  checkSameFilter("still, CUDA", filterBoth(windowOf(still), 2, {}, cuda));
+  const std::vector<WindowFrame> pan = shot(5, 0.5f, 3, 8, 300);
+  checkSameFilter("pan and occluder, CUDA", filterBoth(windowOf(pan), 2, {}, cuda));
+  TemporalOptions learned;
+  learned.learnedTrust = std::make_shared<LearnedTrust>(randomTrust(11));
+  checkSameFilter("learned trust, CUDA", filterBoth(windowOf(pan), 2, learned, cuda));
+  std::vector<WindowFrame> relit = shot(3, 0.0f, 0, 0, 500);
+  for (unsigned t : {0u, 2u}) {
+    for (float& v : relit[t].denoised.pixels) v *= 1.2f;
+    for (float& v : relit[t].noisy.pixels) v *= 1.2f;
+  }
+  checkSameFilter("relit, CUDA", filterBoth(windowOf(relit), 1, {}, cuda));
 }
 
 #ifdef DN_TEST_READS_EXR
