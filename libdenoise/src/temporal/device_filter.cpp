@@ -149,16 +149,19 @@ Tensor chainPositions(const std::vector<const DeviceFrame*>& chain, bool forward
 // passes a guide's test where it passes it at any of them (reproject.cpp's
 // matchesAround).
 struct GuidesAround {
-  Tensor depth, normal, normalLength, albedo;
-  Tensor valid;        // (offsets, pixels)
-  Tensor environment;  // per pixel: showsEnvironment
+  Tensor depth, normal, normalLength, albedo;  // normalLength in double
+  Tensor depthLimit;                           // depthRelative x |z|, in double
+  Tensor valid;                                // (offsets, pixels)
+  Tensor environment;                          // per pixel: showsEnvironment
 };
 
 Tensor normalLength(const Tensor& normal) {
   return torch::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
 }
 
-GuidesAround guidesAround(const DeviceFrame& frame, int r, const Grid& g) {
+GuidesAround guidesAround(const DeviceFrame& frame, const motion::TrustOptions& trust,
+                          const Grid& g) {
+  const int r = trust.neighbourhood;
   std::vector<Tensor> indices, valid;
   const Tensor x = g.x.to(torch::kLong), y = g.y.to(torch::kLong);
   for (int dy = -r; dy <= r; ++dy)
@@ -173,9 +176,13 @@ GuidesAround guidesAround(const DeviceFrame& frame, int r, const Grid& g) {
     return guide.defined() ? guide.index_select(1, index).view({guide.size(0), offsets, -1})
                            : Tensor();
   };
-  GuidesAround out{around(frame.depth),  around(frame.normal), Tensor(),
-                   around(frame.albedo), torch::stack(valid),  Tensor()};
-  if (out.normal.defined()) out.normalLength = normalLength(out.normal);
+  GuidesAround out;
+  out.depth = around(frame.depth), out.normal = around(frame.normal);
+  out.albedo = around(frame.albedo);
+  out.valid = torch::stack(valid);
+  if (out.normal.defined()) out.normalLength = normalLength(out.normal).to(torch::kDouble);
+  if (out.depth.defined())
+    out.depthLimit = trust.depthRelative * out.depth.abs().clamp_min(1e-6f).to(torch::kDouble);
   out.environment = frame.depth.defined()
                         ? (frame.depth[0] == 0) | ~(frame.depth[0].abs() < 1e9f)
                         : torch::zeros({g.pixels()}, frame.denoised.options().dtype(torch::kBool));
@@ -187,26 +194,28 @@ GuidesAround guidesAround(const DeviceFrame& frame, int r, const Grid& g) {
 // own, as a tap may match the depth at one such pixel and the normal at another.
 Tensor sameSurface(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
                    const motion::TrustOptions& o, bool byAlbedo) {
+  // Differences and products in float, the thresholds in double, as
+  // reproject.cpp computes them: half-float guides make exact ties common.
+  const auto asDouble = [](const Tensor& t) { return t.to(torch::kDouble); };
   Tensor passes = torch::ones_like(around.environment);
   if (source.depth.defined() && around.depth.defined()) {
-    const Tensor zs = source.depth.index_select(1, tap).unsqueeze(1), zc = around.depth;
-    passes =
-        passes &
-        (around.valid & ((zs - zc).abs() <= o.depthRelative * zc.abs().clamp_min(1e-6f))[0]).any(0);
+    const Tensor zs = source.depth.index_select(1, tap).unsqueeze(1);
+    const Tensor same = asDouble((zs - around.depth).abs()) <= around.depthLimit;
+    passes = passes & (around.valid & same[0]).any(0);
   }
   if (source.normal.defined() && around.normal.defined()) {
     const Tensor ns = source.normal.index_select(1, tap).unsqueeze(1), nc = around.normal;
-    const Tensor ls = normalLength(ns), lc = around.normalLength;
-    const Tensor dot = ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2];
-    const Tensor background = ls < 1e-3f;
+    const Tensor ls = asDouble(normalLength(ns)), lc = around.normalLength;
+    const Tensor dot = asDouble(ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]);
+    const Tensor background = ls < 1e-3;
     const Tensor same =
-        (background == (lc < 1e-3f)) & (background | (dot >= o.normalCosine * ls * lc));
+        (background == (lc < 1e-3)) & (background | (dot >= o.normalCosine * ls * lc));
     passes = passes & (around.valid & same).any(0);
   }
   if (byAlbedo && source.albedo.defined() && around.albedo.defined()) {
     const Tensor as = source.albedo.index_select(1, tap).unsqueeze(1), ac = around.albedo;
-    const Tensor close =
-        ((as - ac).abs() <= o.albedoAbsolute + o.albedoRelative * torch::max(as, ac)).all(0);
+    const Tensor limit = o.albedoAbsolute + o.albedoRelative * asDouble(torch::max(as, ac));
+    const Tensor close = (~(asDouble((as - ac).abs()) > limit)).all(0);
     passes = passes & (around.valid & close).any(0);
   }
   return passes;
@@ -342,7 +351,7 @@ Centre centreOf(const DeviceFrame& frame, const motion::TrustOptions& trust) {
   // A floor: flat, noise-free regions (a clear sky) must not divide by zero.
   const Tensor median = kth(c.noise, c.noise.numel() / 2 + 1);
   c.noise = torch::maximum(c.noise, (0.1f * median).clamp_min(1e-4f));
-  c.around = guidesAround(frame, trust.neighbourhood, c.grid);
+  c.around = guidesAround(frame, trust, c.grid);
   return c;
 }
 
