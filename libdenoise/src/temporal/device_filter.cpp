@@ -48,31 +48,39 @@ Tensor tonemapped(const Tensor& linear, const Tensor& scale) {
 // Per pixel, the mean over channels of |a - b|.
 Tensor absoluteDifference(const Tensor& a, const Tensor& b) { return (a - b).abs().mean(0); }
 
+// Sums of `values` (rows, columns) over the ranges [starts[k], ends[k]) of
+// dimension `dim`, from a running sum: deterministic on CUDA, unlike atomics.
+Tensor rangeSums(const Tensor& values, int dim, const Tensor& starts, const Tensor& ends) {
+  std::vector<std::int64_t> shape(values.sizes().begin(), values.sizes().end());
+  shape[dim] = 1;
+  const Tensor running =
+      torch::cat({torch::zeros(shape, values.options()), values.cumsum(dim)}, dim);
+  return running.index_select(dim, ends) - running.index_select(dim, starts);
+}
+
 // OIDN's autoexposure (tonemap::oidnExposure): 0.18 over the geometric mean of
 // the luminance's means over bins of about 16 x 16 pixels.
 Tensor exposureOf(const Tensor& color, int width, int height) {
   constexpr int kBin = 16;
   const int binsY = (height + kBin - 1) / kBin, binsX = (width + kBin - 1) / kBin;
-  std::vector<std::int64_t> rowBin(height), columnBin(width);
+  std::vector<std::int64_t> y0(binsY), y1(binsY), x0(binsX), x1(binsX);
+  std::vector<float> counts;
   for (int by = 0; by < binsY; ++by)
-    for (int y = by * height / binsY; y < (by + 1) * height / binsY; ++y) rowBin[y] = by;
-  for (int bx = 0; bx < binsX; ++bx)
-    for (int x = bx * width / binsX; x < (bx + 1) * width / binsX; ++x) columnBin[x] = bx;
+    y0[by] = by * height / binsY, y1[by] = (by + 1) * height / binsY;
+  for (int bx = 0; bx < binsX; ++bx) x0[bx] = bx * width / binsX, x1[bx] = (bx + 1) * width / binsX;
+  for (int by = 0; by < binsY; ++by)
+    for (int bx = 0; bx < binsX; ++bx)
+      counts.push_back(float((y1[by] - y0[by]) * (x1[bx] - x0[bx])));
   const auto device = color.device();
-  const Tensor rows = torch::tensor(rowBin).to(device),
-               columns = torch::tensor(columnBin).to(device);
+  auto onDevice = [&](const std::vector<std::int64_t>& v) { return torch::tensor(v).to(device); };
   const Tensor clean = torch::where(torch::isfinite(color), color.clamp_min(0),
                                     zerosWhere(color > 0, torch::full_like(color, FLT_MAX)));
   const Tensor luminance =
       (0.212671f * clean[0] + 0.715160f * clean[1] + 0.072169f * clean[2]).view({height, width});
-  const Tensor byRow = torch::zeros({binsY, width}, color.options()).index_add_(0, rows, luminance);
-  const Tensor sums = torch::zeros({binsY, binsX}, color.options()).index_add_(1, columns, byRow);
-  const Tensor ones = torch::ones({height, width}, color.options());
-  const Tensor counts =
-      torch::zeros({binsY, binsX}, color.options())
-          .index_add_(1, columns,
-                      torch::zeros({binsY, width}, color.options()).index_add_(0, rows, ones));
-  const Tensor mean = sums / counts;
+  const Tensor byRow = rangeSums(luminance.to(torch::kDouble), 0, onDevice(y0), onDevice(y1));
+  const Tensor sums = rangeSums(byRow, 1, onDevice(x0), onDevice(x1));
+  const Tensor mean =
+      (sums.to(torch::kFloat) / torch::tensor(counts).to(device).view({binsY, binsX}));
   const Tensor valid = mean > 1e-8f;
   const Tensor logSum = zerosWhere(valid, torch::log2(mean)).sum(torch::kDouble);
   const Tensor count = valid.sum();
@@ -150,7 +158,7 @@ Tensor chainPositions(const std::vector<const DeviceFrame*>& chain, bool forward
 // matchesAround).
 struct GuidesAround {
   Tensor depth, normal, normalLength, albedo;  // normalLength in double
-  Tensor depthLimit;                           // depthRelative x |z|, in double
+  Tensor depthLimit;                           // depthRelative x |z|, rounded down to float
   Tensor valid;                                // (offsets, pixels)
   Tensor environment;                          // per pixel: showsEnvironment
 };
@@ -181,44 +189,55 @@ GuidesAround guidesAround(const DeviceFrame& frame, const motion::TrustOptions& 
   out.albedo = around(frame.albedo);
   out.valid = torch::stack(valid);
   if (out.normal.defined()) out.normalLength = normalLength(out.normal).to(torch::kDouble);
-  if (out.depth.defined())
-    out.depthLimit = trust.depthRelative * out.depth.abs().clamp_min(1e-6f).to(torch::kDouble);
+  if (out.depth.defined()) {
+    // The largest float not above the double limit: a float difference
+    // passes it exactly where it passes the double one.
+    const Tensor limit = trust.depthRelative * out.depth.abs().clamp_min(1e-6f).to(torch::kDouble);
+    const Tensor rounded = limit.to(torch::kFloat);
+    out.depthLimit =
+        torch::where(rounded.to(torch::kDouble) > limit,
+                     torch::nextafter(rounded, torch::full_like(rounded, -INFINITY)), rounded);
+  }
   out.environment = frame.depth.defined()
                         ? (frame.depth[0] == 0) | ~(frame.depth[0].abs() < 1e9f)
                         : torch::zeros({g.pixels()}, frame.denoised.options().dtype(torch::kBool));
   return out;
 }
 
-// Per pixel, whether the source's guides at `tap` pass each test at some
-// pixel around the destination (reproject.cpp's sameSurface): each test its
-// own, as a tap may match the depth at one such pixel and the normal at another.
-Tensor sameSurface(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
-                   const motion::TrustOptions& o, bool byAlbedo) {
-  // Differences and products in float, the thresholds in double, as
-  // reproject.cpp computes them: half-float guides make exact ties common.
-  const auto asDouble = [](const Tensor& t) { return t.to(torch::kDouble); };
+// Per pixel, whether the source's guides at `tap` pass the depth and the
+// normal test at some pixel around the destination, each test its own
+// (reproject.cpp's sameSurface: a tap may match the depth at one such pixel
+// and the normal at another). Differences and products in float, the
+// thresholds in double, as reproject.cpp computes them: half-float guides
+// make exact ties common.
+Tensor sameShape(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
+                 const motion::TrustOptions& o) {
   Tensor passes = torch::ones_like(around.environment);
   if (source.depth.defined() && around.depth.defined()) {
     const Tensor zs = source.depth.index_select(1, tap).unsqueeze(1);
-    const Tensor same = asDouble((zs - around.depth).abs()) <= around.depthLimit;
-    passes = passes & (around.valid & same[0]).any(0);
+    passes = passes & (around.valid & ((zs - around.depth).abs() <= around.depthLimit)[0]).any(0);
   }
   if (source.normal.defined() && around.normal.defined()) {
     const Tensor ns = source.normal.index_select(1, tap).unsqueeze(1), nc = around.normal;
-    const Tensor ls = asDouble(normalLength(ns)), lc = around.normalLength;
-    const Tensor dot = asDouble(ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]);
+    const Tensor ls = normalLength(ns).to(torch::kDouble), lc = around.normalLength;
+    const Tensor dot = (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]).to(torch::kDouble);
     const Tensor background = ls < 1e-3;
     const Tensor same =
         (background == (lc < 1e-3)) & (background | (dot >= o.normalCosine * ls * lc));
     passes = passes & (around.valid & same).any(0);
   }
-  if (byAlbedo && source.albedo.defined() && around.albedo.defined()) {
-    const Tensor as = source.albedo.index_select(1, tap).unsqueeze(1), ac = around.albedo;
-    const Tensor limit = o.albedoAbsolute + o.albedoRelative * asDouble(torch::max(as, ac));
-    const Tensor close = (~(asDouble((as - ac).abs()) > limit)).all(0);
-    passes = passes & (around.valid & close).any(0);
-  }
   return passes;
+}
+
+// The same for the albedo test (bilinear taps only).
+Tensor sameAlbedo(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
+                  const motion::TrustOptions& o) {
+  if (!source.albedo.defined() || !around.albedo.defined())
+    return torch::ones_like(around.environment);
+  const Tensor as = source.albedo.index_select(1, tap).unsqueeze(1), ac = around.albedo;
+  const Tensor limit = o.albedoAbsolute + o.albedoRelative * torch::max(as, ac).to(torch::kDouble);
+  const Tensor close = (~((as - ac).abs().to(torch::kDouble) > limit)).all(0);
+  return (around.valid & close).any(0);
 }
 
 // The 4 x 4 taps around a position: tap (i, j) at floor(q) - 1 + (i, j).
@@ -254,10 +273,12 @@ DeviceResampling planResampling(const DeviceFrame& source, const Tensor& positio
   const Taps taps = tapsOf(positions);
   Tensor accepted = torch::zeros({g.pixels()}, positions.options().dtype(torch::kDouble));
   Tensor bits = torch::zeros({g.pixels()}, positions.options().dtype(torch::kInt));
+  std::vector<Tensor> innerShape;  // the bilinear taps' depth and normal tests, for the cubic's too
   for (int t = 0; t < 4; ++t) {
     const Tensor weight = taps.bilinearWeight(t, g);
     const Tensor index = taps.index(1 + (t & 1), 1 + (t >> 1), g);
-    const Tensor matched = (weight > 0) & sameSurface(source, index, around, o, true);
+    innerShape.push_back(sameShape(source, index, around, o));
+    const Tensor matched = (weight > 0) & innerShape.back() & sameAlbedo(source, index, around, o);
     accepted = accepted + zerosWhere(matched, weight.to(torch::kDouble));
     bits = bits | zerosWhere(matched, torch::full_like(bits, 1 << t));
   }
@@ -269,8 +290,11 @@ DeviceResampling planResampling(const DeviceFrame& source, const Tensor& positio
     const Tensor whole = ((taps.fx == 0) | (taps.fx == 1)) & ((taps.fy == 0) | (taps.fy == 1));
     cubic = brought & ~whole & (accepted > 0.999) & taps.inside(0, 0, g) & taps.inside(3, 3, g);
     for (int j = 0; j < 4; ++j)
-      for (int i = 0; i < 4; ++i)
-        cubic = cubic & sameSurface(source, taps.index(i, j, g), around, o, false);
+      for (int i = 0; i < 4; ++i) {
+        const bool inner = i >= 1 && i <= 2 && j >= 1 && j <= 2;
+        cubic = cubic & (inner ? innerShape[(i - 1) + 2 * (j - 1)]
+                               : sameShape(source, taps.index(i, j, g), around, o));
+      }
   }
   bits = bits | zerosWhere(cubic, torch::full_like(bits, kCubicTaps));
   bits = zerosWhere(brought, bits | kBroughtIn);
@@ -544,8 +568,9 @@ Tensor trustFeatures(const Centre& centre, const Contribution& k, const Tensor& 
 // LearnedTrust::weigh over every pixel: its layers as matrix products.
 Tensor weighAll(const LearnedTrust& trust, const Tensor& features) {
   const std::vector<int>& sizes = trust.sizes();
-  const Tensor params = torch::tensor(trust.params()).to(features.device());
-  Tensor x = features;
+  // In double: no TF32 for matrix products on a GPU where it is switched on.
+  const Tensor params = torch::tensor(trust.params()).to(features.device(), torch::kDouble);
+  Tensor x = features.to(torch::kDouble);
   std::int64_t at = 0;
   for (std::size_t l = 1; l < sizes.size(); ++l) {
     const std::int64_t n = sizes[l - 1], m = sizes[l];
@@ -555,7 +580,7 @@ Tensor weighAll(const LearnedTrust& trust, const Tensor& features) {
     if (l + 1 < sizes.size()) x = torch::relu(x);
     at += n * m + m;
   }
-  return torch::sigmoid(x.squeeze(1));
+  return torch::sigmoid(x.squeeze(1)).to(torch::kFloat);
 }
 
 void applyLearnedTrust(Contribution& k, const Tensor& features, const LearnedTrust& trust) {
