@@ -34,14 +34,15 @@ Grid gridOf(const DeviceFrame& frame) {
   return {frame.width, frame.height, xy[1].reshape(-1), xy[0].reshape(-1)};
 }
 
-Tensor zerosWhere(const Tensor& keep, const Tensor& values) {
+// `values` where `keep` holds, else 0.
+Tensor onlyWhere(const Tensor& keep, const Tensor& values) {
   return torch::where(keep, values, torch::zeros_like(values));
 }
 
 // tonemapped() of temporal_filter.cpp: Reinhard after `scale`; NaN: 0, beyond 1e30: 1.
 Tensor tonemapped(const Tensor& linear, const Tensor& scale) {
   const Tensor s = linear * scale;
-  const Tensor positive = zerosWhere(s > 0, s);
+  const Tensor positive = onlyWhere(s > 0, s);
   return torch::where(positive < 1e30, positive / (positive + 1), torch::ones_like(s));
 }
 
@@ -74,7 +75,7 @@ Tensor exposureOf(const Tensor& color, int width, int height) {
   const auto device = color.device();
   auto onDevice = [&](const std::vector<std::int64_t>& v) { return torch::tensor(v).to(device); };
   const Tensor clean = torch::where(torch::isfinite(color), color.clamp_min(0),
-                                    zerosWhere(color > 0, torch::full_like(color, FLT_MAX)));
+                                    onlyWhere(color > 0, torch::full_like(color, FLT_MAX)));
   const Tensor luminance =
       (0.212671f * clean[0] + 0.715160f * clean[1] + 0.072169f * clean[2]).view({height, width});
   const Tensor byRow = rangeSums(luminance.to(torch::kDouble), 0, onDevice(y0), onDevice(y1));
@@ -82,7 +83,7 @@ Tensor exposureOf(const Tensor& color, int width, int height) {
   const Tensor mean =
       (sums.to(torch::kFloat) / torch::tensor(counts).to(device).view({binsY, binsX}));
   const Tensor valid = mean > 1e-8f;
-  const Tensor logSum = zerosWhere(valid, torch::log2(mean)).sum(torch::kDouble);
+  const Tensor logSum = onlyWhere(valid, torch::log2(mean)).sum(torch::kDouble);
   const Tensor count = valid.sum();
   return torch::where(count > 0, 0.18 / torch::exp2(logSum / count.clamp_min(1)),
                       torch::ones_like(logSum))
@@ -126,7 +127,7 @@ Tensor lost(const Tensor& positions) {
 // reprojectNearest: zeros where the position is lost.
 Tensor reprojectNearest(const Tensor& source, const Tensor& positions, const Grid& g) {
   const Tensor moved = source.index_select(1, nearestPixel(positions[0], positions[1], g));
-  return zerosWhere(~lost(positions), moved);
+  return onlyWhere(~lost(positions), moved);
 }
 
 // motion::chainPositions along `chain` (the centre first).
@@ -255,7 +256,7 @@ struct Taps {
   // Bilinear tap t (0-3): (t & 1, t >> 1) from floor(q); weight 0 off the image.
   Tensor bilinearWeight(int t, const Grid& g) const {
     const Tensor w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-    return zerosWhere(usable & inside(1 + (t & 1), 1 + (t >> 1), g) & (w > 0), w);
+    return onlyWhere(usable & inside(1 + (t & 1), 1 + (t >> 1), g) & (w > 0), w);
   }
 };
 
@@ -279,8 +280,8 @@ DeviceResampling planResampling(const DeviceFrame& source, const Tensor& positio
     const Tensor index = taps.index(1 + (t & 1), 1 + (t >> 1), g);
     innerShape.push_back(sameShape(source, index, around, o));
     const Tensor matched = (weight > 0) & innerShape.back() & sameAlbedo(source, index, around, o);
-    accepted = accepted + zerosWhere(matched, weight.to(torch::kDouble));
-    bits = bits | zerosWhere(matched, torch::full_like(bits, 1 << t));
+    accepted = accepted + onlyWhere(matched, weight.to(torch::kDouble));
+    bits = bits | onlyWhere(matched, torch::full_like(bits, 1 << t));
   }
   const Tensor brought = taps.usable & ~around.environment & (accepted >= o.minCoverage);
   Tensor cubic = torch::zeros_like(brought);
@@ -296,9 +297,9 @@ DeviceResampling planResampling(const DeviceFrame& source, const Tensor& positio
                                : sameShape(source, taps.index(i, j, g), around, o));
       }
   }
-  bits = bits | zerosWhere(cubic, torch::full_like(bits, kCubicTaps));
-  bits = zerosWhere(brought, bits | kBroughtIn);
-  const Tensor trust = zerosWhere(brought, accepted.clamp_max(1.0)).to(torch::kFloat);
+  bits = bits | onlyWhere(cubic, torch::full_like(bits, kCubicTaps));
+  bits = onlyWhere(brought, bits | kBroughtIn);
+  const Tensor trust = onlyWhere(brought, accepted.clamp_max(1.0)).to(torch::kFloat);
   return {positions, bits.to(torch::kUInt8), trust};
 }
 
@@ -317,13 +318,13 @@ Tensor resample(const DeviceResampling& plan, const Tensor& source, const Grid& 
   Tensor accepted = torch::zeros({g.pixels()}, source.options());
   for (int t = 0; t < 4; ++t) {
     const Tensor used = (bits & (1 << t)) != 0;
-    const Tensor weight = zerosWhere(used, taps.bilinearWeight(t, g));
+    const Tensor weight = onlyWhere(used, taps.bilinearWeight(t, g));
     accepted = accepted + weight;
     sum = sum + weight * source.index_select(1, taps.index(1 + (t & 1), 1 + (t >> 1), g));
   }
   const Tensor brought = (bits & kBroughtIn) != 0;
   Tensor out =
-      zerosWhere(brought, sum / torch::where(brought, accepted, torch::ones_like(accepted)));
+      onlyWhere(brought, sum / torch::where(brought, accepted, torch::ones_like(accepted)));
   const Tensor cubicTaps = (bits & kCubicTaps) != 0;
   // reproject.cpp's cubic takes at most 8 channels.
   if (source.size(0) > 8 || !cubicTaps.any().item<bool>()) return out;
@@ -345,7 +346,7 @@ Tensor movedPixels(const Tensor& positions, const Grid& g) {
 
 Tensor stillness(const Tensor& positions, double pixels, const Grid& g) {
   const Tensor moved = movedPixels(positions, g);
-  return zerosWhere(moved < pixels, 1.0f - moved / float(pixels));
+  return onlyWhere(moved < pixels, 1.0f - moved / float(pixels));
 }
 
 // The centre frame's view for the tests, computed once a frame.
@@ -425,7 +426,7 @@ Tensor lightChange(const Tensor& current, const Tensor& moved, const Tensor& tru
   const Tensor n = torch::round(sums[0]), d = sums[1], v = sums[2];
   const Tensor defined = (n >= 1) & (v > 0);
   const Tensor safeN = n.clamp_min(1), safeV = torch::where(defined, v, torch::ones_like(v));
-  return zerosWhere(defined, (d / safeN).abs() / (torch::sqrt(safeV) / safeN));
+  return onlyWhere(defined, (d / safeN).abs() / (torch::sqrt(safeV) / safeN));
 }
 
 struct Contribution {
@@ -505,7 +506,7 @@ struct Weighted {
 std::pair<Tensor, Tensor> weightedMean(const Tensor& own, const std::vector<Weighted>& others) {
   Tensor sum = own.clone(), total = torch::ones({own.size(1)}, own.options());
   for (const Weighted& k : others) {
-    const Tensor w = zerosWhere(*k.weight > 0, *k.weight);
+    const Tensor w = onlyWhere(*k.weight > 0, *k.weight);
     sum = sum + w * *k.image;
     total = total + w;
   }
@@ -554,8 +555,8 @@ Tensor trustFeatures(const Centre& centre, const Contribution& k, const Tensor& 
   f[kOwnDifferenceBox] = torch::log1p(boxMean(toOwn.unsqueeze(0), 1, g)[0]);
   f[kMeanDifference] = torch::log1p(toMean);
   f[kLightChange] = k.lightChange.defined() ? torch::log1p(k.lightChange) : constant(0.0);
-  f[kMotion] = zerosWhere(torch::isfinite(moved),
-                          torch::log1p(torch::nan_to_num(moved, 0.0).clamp_max(1e3f)));
+  f[kMotion] = onlyWhere(torch::isfinite(moved),
+                         torch::log1p(torch::nan_to_num(moved, 0.0).clamp_max(1e3f)));
   f[kDistance] = constant(distance / 4.0);
   f[kNoiseLevel] = torch::log(centre.noise);
   f[kSpread] = constant(std::min(k.fullSpread, 3.0));
@@ -586,7 +587,7 @@ Tensor weighAll(const LearnedTrust& trust, const Tensor& features) {
 void applyLearnedTrust(Contribution& k, const Tensor& features, const LearnedTrust& trust) {
   const Tensor w = weighAll(trust, features);
   // NaN (a feature of a NaN render): 0.
-  k.weight = torch::where(k.weight > 0, zerosWhere(w > 0, k.weight * w), k.weight);
+  k.weight = torch::where(k.weight > 0, onlyWhere(w > 0, k.weight * w), k.weight);
 }
 
 // The noisy renders accumulated with the results' weights, at the nearest pixel.
@@ -600,7 +601,7 @@ void accumulateNoisy(const Centre& centre, const std::vector<const DeviceFrame*>
     if (!c.used()) continue;
     Tensor moved = reprojectNearest(frames[k]->noisy, c.resampling.positions, g);
     if (c.relight.defined()) moved = moved * c.relight;
-    const Tensor w = zerosWhere(c.weight > 0, c.weight);
+    const Tensor w = onlyWhere(c.weight > 0, c.weight);
     sum = sum + w * moved;
     weight = weight + w;
     squares = squares + w * w;
