@@ -8,10 +8,12 @@
 //
 // It computes in float32 where filterFrame computes in double, and its sums
 // run in another order, so its results differ from filterFrame's in the last
-// bits (tests/test_temporal_device.cpp states by how much); where no
-// neighbour is trusted both give the frame's own result exactly. Whole-frame
-// decisions (a neighbour's spread, its noise correlation) come back to the
-// host once per neighbour; every per-pixel step stays on the device.
+// bits (tests/test_temporal_device.cpp states by how much); the guides' tests
+// compare with their thresholds in double, as reproject.cpp does, so the taps
+// are the same. Where no neighbour is trusted both give the frame's own
+// result exactly. Whole-frame decisions (a neighbour's spread, its noise
+// correlation) come back to the host once per neighbour; every per-pixel step
+// stays on the device, and runs the same from run to run there (no atomics).
 #pragma once
 
 #include <torch/torch.h>
