@@ -90,30 +90,55 @@ Tensor exposureOf(const Tensor& color, int width, int height) {
       .to(torch::kFloat);
 }
 
-// Sums over the (2r+1)^2 box around each pixel, zero beyond the image.
+// The box of (2r+1)^2 pixels around each pixel, clipped to the image: its
+// first and last row and column (one past), per row and per column.
+struct Box {
+  Tensor y0, y1, x0, x1;
+};
+
+Box boxOf(int r, const Grid& g, const torch::Device& device) {
+  const auto longs = torch::TensorOptions().dtype(torch::kLong).device(device);
+  const Tensor ys = torch::arange(g.height, longs), xs = torch::arange(g.width, longs);
+  return {(ys - r).clamp_min(0), (ys + r + 1).clamp_max(g.height), (xs - r).clamp_min(0),
+          (xs + r + 1).clamp_max(g.width)};
+}
+
+// Per pixel, the sums of `values` (channels, pixels) over its box, in double
+// from integral images, as temporal_filter.cpp's BoxSums.
 Tensor boxSum(const Tensor& values, int r, const Grid& g) {
-  const int k = 2 * r + 1;
-  const auto options = F::AvgPool2dFuncOptions(k).stride(1).padding(r).count_include_pad(true);
-  return F::avg_pool2d(values.view({1, -1, g.height, g.width}), options).view({-1, g.pixels()}) *
-         float(k * k);
+  const std::int64_t channels = values.size(0);
+  const Tensor integral =
+      F::pad(values.to(torch::kDouble).view({channels, g.height, g.width}).cumsum(1).cumsum(2),
+             F::PadFuncOptions({1, 0, 1, 0}));
+  const Box box = boxOf(r, g, values.device());
+  auto corner = [&](const Tensor& ys, const Tensor& xs) {
+    return integral.index_select(1, ys).index_select(2, xs);
+  };
+  const Tensor sums = corner(box.y1, box.x1) - corner(box.y0, box.x1) - corner(box.y1, box.x0) +
+                      corner(box.y0, box.x0);
+  return sums.view({channels, g.pixels()});
 }
 
-// Means over the box clipped to the image.
+// Per pixel, the number of pixels in its box (double).
+Tensor boxPixels(int r, const Grid& g, const torch::Device& device) {
+  const Box box = boxOf(r, g, device);
+  return ((box.y1 - box.y0).unsqueeze(1) * (box.x1 - box.x0).unsqueeze(0))
+      .to(torch::kDouble)
+      .view({g.pixels()});
+}
+
+// Per pixel, the means of `values` over its box (double).
 Tensor boxMean(const Tensor& values, int r, const Grid& g) {
-  const auto options =
-      F::AvgPool2dFuncOptions(2 * r + 1).stride(1).padding(r).count_include_pad(false);
-  return F::avg_pool2d(values.view({1, -1, g.height, g.width}), options).view({-1, g.pixels()});
+  return boxSum(values, r, g) / boxPixels(r, g, values.device());
 }
 
-// Counts of the pixels where `mask` holds within the box: whole numbers.
-Tensor boxCount(const Tensor& mask, int r, const Grid& g) {
-  return torch::round(boxSum(mask.to(torch::kFloat), r, g));
-}
-
-// std::lround, clamped to [0, size): NaN gives 0 (callers mask it).
+// std::lround, clamped to [0, size): NaN gives 0 (callers mask it). The
+// fraction v - trunc(v) is exact in float, so halves round away from zero
+// as lround's do (floor(v + 0.5) would round 0.49999997 up).
 Tensor nearest(const Tensor& v, int size) {
-  const Tensor d = torch::nan_to_num(v, 0.0).to(torch::kDouble);
-  return (torch::floor(d.abs() + 0.5) * d.sign()).clamp(0, size - 1).to(torch::kLong);
+  const Tensor finite = torch::nan_to_num(v, 0.0), whole = torch::trunc(finite);
+  const Tensor rounded = whole + onlyWhere((finite - whole).abs() >= 0.5f, finite.sign());
+  return rounded.clamp(0, size - 1).to(torch::kLong);
 }
 
 Tensor nearestPixel(const Tensor& qx, const Tensor& qy, const Grid& g) {
@@ -153,22 +178,23 @@ Tensor chainPositions(const std::vector<const DeviceFrame*>& chain, bool forward
   return torch::stack({qx, qy});
 }
 
-// The centre's guides at every pixel within `neighbourhood` of each pixel:
-// (channels, offsets, pixels), and which offsets lie on the image. A tap
-// passes a guide's test where it passes it at any of them (reproject.cpp's
-// matchesAround).
-struct GuidesAround {
-  Tensor depth, normal, normalLength, albedo;  // normalLength in double
-  Tensor depthLimit;                           // depthRelative x |z|, rounded down to float
-  Tensor valid;                                // (offsets, pixels)
-  Tensor environment;                          // per pixel: showsEnvironment
+// The centre frame's guides for the surface tests, and each pixel's
+// neighbourhood: a tap passes a guide's test where it passes it at the pixel
+// or at one within `neighbourhood` of it (reproject.cpp's matchesAround).
+struct CentreGuides {
+  // depthLimit: depthRelative x |z| in double, rounded down to float;
+  // normalLength in double.
+  Tensor depth, depthLimit, normal, normalLength, albedo;
+  // (offsets, pixels): the pixels around each, and which of them lie on the image.
+  Tensor around, aroundValid;
+  Tensor environment;  // per pixel: showsEnvironment
 };
 
 Tensor normalLength(const Tensor& normal) {
   return torch::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
 }
 
-GuidesAround guidesAround(const DeviceFrame& frame, const motion::TrustOptions& trust,
+CentreGuides centreGuides(const DeviceFrame& frame, const motion::TrustOptions& trust,
                           const Grid& g) {
   const int r = trust.neighbourhood;
   std::vector<Tensor> indices, valid;
@@ -179,21 +205,14 @@ GuidesAround guidesAround(const DeviceFrame& frame, const motion::TrustOptions& 
       valid.push_back((ox >= 0) & (oy >= 0) & (ox < g.width) & (oy < g.height));
       indices.push_back(oy.clamp(0, g.height - 1) * g.width + ox.clamp(0, g.width - 1));
     }
-  const Tensor index = torch::stack(indices).reshape(-1);
-  const auto offsets = std::int64_t(indices.size());
-  auto around = [&](const Tensor& guide) {
-    return guide.defined() ? guide.index_select(1, index).view({guide.size(0), offsets, -1})
-                           : Tensor();
-  };
-  GuidesAround out;
-  out.depth = around(frame.depth), out.normal = around(frame.normal);
-  out.albedo = around(frame.albedo);
-  out.valid = torch::stack(valid);
-  if (out.normal.defined()) out.normalLength = normalLength(out.normal).to(torch::kDouble);
-  if (out.depth.defined()) {
+  CentreGuides out{frame.depth,         {}, frame.normal, {}, frame.albedo, torch::stack(indices),
+                   torch::stack(valid), {}};
+  if (frame.normal.defined()) out.normalLength = normalLength(frame.normal).to(torch::kDouble);
+  if (frame.depth.defined()) {
     // The largest float not above the double limit: a float difference
     // passes it exactly where it passes the double one.
-    const Tensor limit = trust.depthRelative * out.depth.abs().clamp_min(1e-6f).to(torch::kDouble);
+    const Tensor limit =
+        trust.depthRelative * frame.depth.abs().clamp_min(1e-6f).to(torch::kDouble);
     const Tensor rounded = limit.to(torch::kFloat);
     out.depthLimit =
         torch::where(rounded.to(torch::kDouble) > limit,
@@ -205,40 +224,82 @@ GuidesAround guidesAround(const DeviceFrame& frame, const motion::TrustOptions& 
   return out;
 }
 
-// Per pixel, whether the source's guides at `tap` pass the depth and the
-// normal test at some pixel around the destination, each test its own
-// (reproject.cpp's sameSurface: a tap may match the depth at one such pixel
-// and the normal at another). Differences and products in float, the
-// thresholds in double, as reproject.cpp computes them: half-float guides
-// make exact ties common.
-Tensor sameShape(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
-                 const motion::TrustOptions& o) {
-  Tensor passes = torch::ones_like(around.environment);
-  if (source.depth.defined() && around.depth.defined()) {
-    const Tensor zs = source.depth.index_select(1, tap).unsqueeze(1);
-    passes = passes & (around.valid & ((zs - around.depth).abs() <= around.depthLimit)[0]).any(0);
-  }
-  if (source.normal.defined() && around.normal.defined()) {
-    const Tensor ns = source.normal.index_select(1, tap).unsqueeze(1), nc = around.normal;
-    const Tensor ls = normalLength(ns).to(torch::kDouble), lc = around.normalLength;
-    const Tensor dot = (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]).to(torch::kDouble);
-    const Tensor background = ls < 1e-3;
-    const Tensor same =
-        (background == (lc < 1e-3)) & (background | (dot >= o.normalCosine * ls * lc));
-    passes = passes & (around.valid & same).any(0);
-  }
-  return passes;
+// `image` (channels, pixels) at `index` (any shape): (channels, ...index's shape).
+Tensor gather(const Tensor& image, const Tensor& index) {
+  std::vector<std::int64_t> shape = {image.size(0)};
+  shape.insert(shape.end(), index.sizes().begin(), index.sizes().end());
+  return image.index_select(1, index.reshape(-1)).view(shape);
 }
 
-// The same for the albedo test (bilinear taps only).
-Tensor sameAlbedo(const DeviceFrame& source, const Tensor& tap, const GuidesAround& around,
-                  const motion::TrustOptions& o) {
-  if (!source.albedo.defined() || !around.albedo.defined())
-    return torch::ones_like(around.environment);
-  const Tensor as = source.albedo.index_select(1, tap).unsqueeze(1), ac = around.albedo;
-  const Tensor limit = o.albedoAbsolute + o.albedoRelative * torch::max(as, ac).to(torch::kDouble);
-  const Tensor close = (~((as - ac).abs().to(torch::kDouble) > limit)).all(0);
-  return (around.valid & close).any(0);
+// One guide's test of the source's pixels `s` against the centre's pixels
+// `at` (index tensors whose shapes broadcast). Differences and products in
+// float, the thresholds in double, as reproject.cpp computes them:
+// half-float guides make exact ties common.
+enum class Guide { Depth, Normal, Albedo };
+
+Tensor guideTest(Guide guide, const DeviceFrame& source, const CentreGuides& c, const Tensor& s,
+                 const Tensor& at, const motion::TrustOptions& o) {
+  switch (guide) {
+    case Guide::Depth:
+      return ((gather(source.depth, s) - gather(c.depth, at)).abs() <= gather(c.depthLimit, at))[0];
+    case Guide::Normal: {
+      const Tensor ns = gather(source.normal, s), nc = gather(c.normal, at);
+      const Tensor ls = normalLength(ns).to(torch::kDouble);
+      const Tensor lc = gather(c.normalLength.unsqueeze(0), at)[0];
+      const Tensor dot = (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]).to(torch::kDouble);
+      const Tensor background = ls < 1e-3;
+      return (background == (lc < 1e-3)) & (background | (dot >= o.normalCosine * ls * lc));
+    }
+    case Guide::Albedo: {
+      const Tensor as = gather(source.albedo, s), ac = gather(c.albedo, at);
+      const Tensor limit =
+          o.albedoAbsolute + o.albedoRelative * torch::max(as, ac).to(torch::kDouble);
+      return (~((as - ac).abs().to(torch::kDouble) > limit)).all(0);
+    }
+  }
+  throw std::logic_error("guideTest: an unknown guide");
+}
+
+bool bothHave(Guide guide, const DeviceFrame& source, const CentreGuides& c) {
+  switch (guide) {
+    case Guide::Depth:
+      return source.depth.defined() && c.depth.defined();
+    case Guide::Normal:
+      return source.normal.defined() && c.normal.defined();
+    case Guide::Albedo:
+      return source.albedo.defined() && c.albedo.defined();
+  }
+  return false;
+}
+
+// Per tap and destination (`taps`: (count, destinations) source pixels,
+// `destinations` the centre's pixels), whether the tap passes `guide`'s test
+// at the destination or at a pixel around it. Most pass at the destination
+// itself: only the others are tested around it, one copy to the host to
+// count them.
+Tensor passesAround(Guide guide, const DeviceFrame& source, const CentreGuides& c,
+                    const Tensor& taps, const Tensor& destinations, const motion::TrustOptions& o) {
+  const std::int64_t count = taps.size(0), n = taps.size(1);
+  if (!bothHave(guide, source, c)) return torch::ones({count, n}, c.environment.options());
+  Tensor passes = guideTest(guide, source, c, taps, destinations.unsqueeze(0), o).reshape(-1);
+  const Tensor failed = (~passes).nonzero().squeeze(1);
+  if (failed.numel() > 0) {
+    const Tensor pixel = destinations.index_select(0, failed.remainder(n));
+    const Tensor tap = taps.reshape(-1).index_select(0, failed).unsqueeze(0);
+    const Tensor near = guideTest(guide, source, c, tap, c.around.index_select(1, pixel), o);
+    passes = passes.index_put({failed}, (near & c.aroundValid.index_select(1, pixel)).any(0));
+  }
+  return passes.view({count, n});
+}
+
+// reproject.cpp's sameSurface over `taps` (count, destinations): depth and
+// normal, and the albedo where `byAlbedo`.
+Tensor sameSurface(const DeviceFrame& source, const CentreGuides& c, const Tensor& taps,
+                   const Tensor& destinations, const motion::TrustOptions& o, bool byAlbedo) {
+  Tensor passes = passesAround(Guide::Depth, source, c, taps, destinations, o) &
+                  passesAround(Guide::Normal, source, c, taps, destinations, o);
+  if (byAlbedo) passes = passes & passesAround(Guide::Albedo, source, c, taps, destinations, o);
+  return passes;
 }
 
 // The 4 x 4 taps around a position: tap (i, j) at floor(q) - 1 + (i, j).
@@ -258,6 +319,7 @@ struct Taps {
     const Tensor w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
     return onlyWhere(usable & inside(1 + (t & 1), 1 + (t >> 1), g) & (w > 0), w);
   }
+  Tensor bilinearIndex(int t, const Grid& g) const { return index(1 + (t & 1), 1 + (t >> 1), g); }
 };
 
 Taps tapsOf(const Tensor& positions) {
@@ -267,35 +329,50 @@ Taps tapsOf(const Tensor& positions) {
   return {fx0.to(torch::kLong), fy0.to(torch::kLong), qx - fx0, qy - fy0, usable};
 }
 
+// Where Catmull-Rom may resample among `candidates`: its 12 outer taps show
+// the destination's surface by depth and normal (the inner 4, the bilinear
+// taps, were tested already).
+Tensor outerTapsMatch(const DeviceFrame& source, const CentreGuides& c, const Taps& taps,
+                      const Tensor& candidates, const motion::TrustOptions& o, const Grid& g) {
+  const Tensor pixels = candidates.nonzero().squeeze(1);
+  if (pixels.numel() == 0) return candidates;
+  std::vector<Tensor> outer;
+  for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i)
+      if (i == 0 || i == 3 || j == 0 || j == 3)
+        outer.push_back(taps.index(i, j, g).index_select(0, pixels));
+  const Tensor match = sameSurface(source, c, torch::stack(outer), pixels, o, false).all(0);
+  return candidates.index_put({pixels}, match);
+}
+
 // motion::planResampling on the device.
 DeviceResampling planResampling(const DeviceFrame& source, const Tensor& positions,
-                                const GuidesAround& around, const motion::TrustOptions& o,
+                                const CentreGuides& c, const motion::TrustOptions& o,
                                 const Grid& g) {
   const Taps taps = tapsOf(positions);
+  std::vector<Tensor> indices;
+  for (int t = 0; t < 4; ++t) indices.push_back(taps.bilinearIndex(t, g));
+  const Tensor all = torch::arange(g.pixels(), indices[0].options());
+  const Tensor shape = sameSurface(source, c, torch::stack(indices), all, o, false);
+  const Tensor albedo = passesAround(Guide::Albedo, source, c, torch::stack(indices), all, o);
   Tensor accepted = torch::zeros({g.pixels()}, positions.options().dtype(torch::kDouble));
   Tensor bits = torch::zeros({g.pixels()}, positions.options().dtype(torch::kInt));
-  std::vector<Tensor> innerShape;  // the bilinear taps' depth and normal tests, for the cubic's too
-  for (int t = 0; t < 4; ++t) {
+  for (int t = 0; t < 4; ++t) {  // in reproject.cpp's order: the same sums
     const Tensor weight = taps.bilinearWeight(t, g);
-    const Tensor index = taps.index(1 + (t & 1), 1 + (t >> 1), g);
-    innerShape.push_back(sameShape(source, index, around, o));
-    const Tensor matched = (weight > 0) & innerShape.back() & sameAlbedo(source, index, around, o);
+    const Tensor matched = (weight > 0) & shape[t] & albedo[t];
     accepted = accepted + onlyWhere(matched, weight.to(torch::kDouble));
     bits = bits | onlyWhere(matched, torch::full_like(bits, 1 << t));
   }
-  const Tensor brought = taps.usable & ~around.environment & (accepted >= o.minCoverage);
+  const Tensor brought = taps.usable & ~c.environment & (accepted >= o.minCoverage);
   Tensor cubic = torch::zeros_like(brought);
   if (o.cubic) {
     // Where every bilinear tap matched, the sharper cubic where all 16 of its
     // taps lie on the image and show the destination's surface.
     const Tensor whole = ((taps.fx == 0) | (taps.fx == 1)) & ((taps.fy == 0) | (taps.fy == 1));
-    cubic = brought & ~whole & (accepted > 0.999) & taps.inside(0, 0, g) & taps.inside(3, 3, g);
-    for (int j = 0; j < 4; ++j)
-      for (int i = 0; i < 4; ++i) {
-        const bool inner = i >= 1 && i <= 2 && j >= 1 && j <= 2;
-        cubic = cubic & (inner ? innerShape[(i - 1) + 2 * (j - 1)]
-                               : sameShape(source, taps.index(i, j, g), around, o));
-      }
+    cubic = outerTapsMatch(source, c, taps,
+                           brought & ~whole & (accepted > 0.999) & taps.inside(0, 0, g) &
+                               taps.inside(3, 3, g) & shape.all(0),
+                           o, g);
   }
   bits = bits | onlyWhere(cubic, torch::full_like(bits, kCubicTaps));
   bits = onlyWhere(brought, bits | kBroughtIn);
@@ -356,11 +433,11 @@ struct Centre {
   Tensor scale;                          // its autoexposure, 0-d
   Tensor mapped, noisyMapped, residual;  // its result and render tonemapped; their difference
   Tensor noise;                          // the residual's local level, floored
-  GuidesAround around;
+  CentreGuides guides;
 };
 
 Tensor localNoise(const Tensor& residual, int r, const Grid& g) {
-  return torch::sqrt(boxMean((residual * residual).mean(0, true), r, g))[0];
+  return torch::sqrt(boxMean((residual * residual).mean(0, true), r, g))[0].to(torch::kFloat);
 }
 
 // The k-th smallest (1-based) of `values`.
@@ -376,7 +453,7 @@ Centre centreOf(const DeviceFrame& frame, const motion::TrustOptions& trust) {
   // A floor: flat, noise-free regions (a clear sky) must not divide by zero.
   const Tensor median = kth(c.noise, c.noise.numel() / 2 + 1);
   c.noise = torch::maximum(c.noise, (0.1f * median).clamp_min(1e-4f));
-  c.around = guidesAround(frame, trust, c.grid);
+  c.guides = centreGuides(frame, trust, c.grid);
   return c;
 }
 
@@ -403,9 +480,10 @@ Tensor normalisedDifference(const Centre& centre, const Tensor& image) {
 
 // Per pixel and channel, the mean of `image` over the box's trusted pixels; -1 where none.
 Tensor trustedBoxMean(const Tensor& image, const Tensor& trusted, int r, const Grid& g) {
-  const Tensor count = boxCount(trusted.unsqueeze(0), r, g);
+  const Tensor count = boxSum(trusted.unsqueeze(0), r, g);
   const Tensor sums = boxSum(image * trusted.to(torch::kFloat), r, g);
-  return torch::where(count > 0, sums / count.clamp_min(1), torch::full_like(sums, -1.0f));
+  return torch::where(count > 0, sums / count.clamp_min(1), torch::full_like(sums, -1.0))
+      .to(torch::kFloat);
 }
 
 Tensor relightFactor(const Tensor& moved, const Tensor& own, const Tensor& trust, int r,
@@ -423,10 +501,10 @@ Tensor lightChange(const Tensor& current, const Tensor& moved, const Tensor& tru
   const Tensor variance =
       (currentResidual * currentResidual + movedResidual * movedResidual).sum(0) / 9.0f * mask;
   const Tensor sums = boxSum(torch::stack({mask, difference, variance}), r, g);
-  const Tensor n = torch::round(sums[0]), d = sums[1], v = sums[2];
+  const Tensor n = sums[0], d = sums[1], v = sums[2];
   const Tensor defined = (n >= 1) & (v > 0);
   const Tensor safeN = n.clamp_min(1), safeV = torch::where(defined, v, torch::ones_like(v));
-  return onlyWhere(defined, (d / safeN).abs() / (torch::sqrt(safeV) / safeN));
+  return onlyWhere(defined, (d / safeN).abs() / (torch::sqrt(safeV) / safeN)).to(torch::kFloat);
 }
 
 struct Contribution {
@@ -448,7 +526,7 @@ Contribution contributionOf(const Centre& centre, const DeviceFrame& neighbour,
   // depend on how far its successors have got); it counts where the surface
   // stood still, which pastHistoriesOf weighs.
   const bool withHistory = !forward && neighbour.history.defined();
-  DeviceResampling plan = planResampling(neighbour, positions, centre.around, options.trust, g);
+  DeviceResampling plan = planResampling(neighbour, positions, centre.guides, options.trust, g);
   Tensor moved = resample(
       plan, withHistory ? torch::cat({neighbour.denoised, neighbour.history}) : neighbour.denoised,
       g);
@@ -552,7 +630,7 @@ Tensor trustFeatures(const Centre& centre, const Contribution& k, const Tensor& 
   std::vector<Tensor> f(kTrustFeatureCount);
   f[kGuideTrust] = k.resampling.trust;
   f[kOwnDifference] = torch::log1p(toOwn);
-  f[kOwnDifferenceBox] = torch::log1p(boxMean(toOwn.unsqueeze(0), 1, g)[0]);
+  f[kOwnDifferenceBox] = torch::log1p(boxMean(toOwn.unsqueeze(0), 1, g)[0]).to(torch::kFloat);
   f[kMeanDifference] = torch::log1p(toMean);
   f[kLightChange] = k.lightChange.defined() ? torch::log1p(k.lightChange) : constant(0.0);
   f[kMotion] = onlyWhere(torch::isfinite(moved),
