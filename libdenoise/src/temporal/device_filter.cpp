@@ -857,6 +857,7 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
   if (options.observeTrust) observe(c, neighbours, contributions, features, options);
 
   DeviceTemporalResult result;
+  result.width = current.width, result.height = current.height;
   Tensor totalWeight;
   std::tie(result.color, totalWeight) = weightedMean(current.denoised, usedOf(contributions));
   result.stats.neighbours = static_cast<int>(neighbours.size());
@@ -939,7 +940,7 @@ torch::Tensor blendWithHistory(const torch::Tensor& filtered, const torch::Tenso
 }
 
 TemporalResult toHost(const DeviceTemporalResult& result, bool withWeights) {
-  const int w = result.weights.width, h = result.weights.height;
+  const int w = result.width, h = result.height;
   TemporalResult out;
   out.color = pixelsToImage(result.color, w, h);
   if (withWeights) out.weights = result.weights.toHost();

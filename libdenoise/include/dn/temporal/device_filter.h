@@ -77,6 +77,7 @@ struct DevicePastHistories {
 };
 
 struct DeviceTemporalResult {
+  int width = 0, height = 0;
   torch::Tensor color;  // 3 channels
   DeviceFilterWeights weights;
   torch::Tensor history, historyFrames;  // undefined where accumulatedShare is 0
