@@ -412,15 +412,16 @@ Tensor resample(const DeviceResampling& plan, const Tensor& source, const Grid& 
   for (int j = 0; j < 4; ++j)
     for (int i = 0; i < 4; ++i)
       cubic = cubic + (wx[i] * wy[j]) * source.index_select(1, taps.index(i, j, g));
-  const Tensor sharper = cubicTaps & (cubic >= 0).all(0);
+  const Tensor sharper = cubicTaps & ~(cubic < 0).any(0);  // NaN stays cubic, as there
   return torch::where(sharper, cubic, out);
 }
 
-// Per pixel, how still the surface stood: 1 where it did not move, 0 from `pixels` on.
+// Per pixel, how far its surface moved on screen (NaN: left it).
 Tensor movedPixels(const Tensor& positions, const Grid& g) {
   return torch::hypot(positions[0] - g.x, positions[1] - g.y);
 }
 
+// Per pixel, how still the surface stood: 1 where it did not move, 0 from `pixels` on.
 Tensor stillness(const Tensor& positions, double pixels, const Grid& g) {
   const Tensor moved = movedPixels(positions, g);
   return onlyWhere(moved < pixels, 1.0f - moved / float(pixels));
