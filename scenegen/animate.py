@@ -1,14 +1,14 @@
 """Animated random scenes for learning the temporal filter's trust (Blender 5 Cycles).
 
-  /work/venv-bpy/bin/python scenegen/animate.py --seeds 0-31 --out DATA/anim --frames 7 --target-spp 32
+  /work/venv-bpy/bin/python scenegen/animate.py --seeds 0-23 --out DATA/anim --frames 7 --target-spp 32
 
 Each seed builds a scene of generate.py (its archetypes, materials and lights)
 and animates it the way shots fail a temporal filter: one to three objects
 slide and turn (most given metal, plastic or coated surfaces, whose
 reflections do not follow their motion), a sun swings or a lamp moves (shadows
 sweeping still surfaces) or a light dims, and the camera follows its move or
-stands still. A quarter of the scenes are locked off, nothing moving but the
-noise, and one in ten changes only its light. A longer lens on some scenes frames a crop of a wider shot, so
+stands still. With --locked-off and --light-only, that share of the scenes
+has nothing moving but the noise, or only its light changing. A longer lens on some scenes frames a crop of a wider shot, so
 that motion and detail come at the scale of 1080p pixels.
 
 Per frame 1..FRAMES, with the Vector pass and the feature passes, the noise
@@ -38,13 +38,17 @@ from mathutils import Vector  # noqa: E402
 
 def parse_args():
     p = argparse.ArgumentParser(prog="animate.py")
-    p.add_argument("--seeds", default="0-31", help="first-last, inclusive")
+    p.add_argument("--seeds", default="0-23", help="first-last, inclusive")
     p.add_argument("--out", required=True)
     p.add_argument("--res", type=int, default=128)
     p.add_argument("--frames", type=int, default=8)
     p.add_argument("--spp", default="4,16", help="the inputs' samples per pixel")
     p.add_argument("--target-spp", type=int, default=64)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--locked-off", type=float, default=0.0,
+                   help="the share of scenes where nothing moves but the noise (0.25 in the trust tried with them)")
+    p.add_argument("--light-only", type=float, default=0.0,
+                   help="the share of scenes where only the light changes (0.10 beside --locked-off 0.25)")
     args = p.parse_args(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:])
     first, last = (int(v) for v in args.seeds.split("-"))
     args.seed_list = list(range(first, last + 1))
@@ -144,13 +148,13 @@ def render(scene, path, samples, seed):
     gen.render_to(path, scene, samples, seed, "16")
 
 
-def shot_kind(seed):
-    """A quarter of the scenes are locked off (nothing moves but the noise) and
-    one in ten changes only its light: where every neighbour shows the same
-    surface, the trust must learn to take them all. Drawn apart from the rest,
-    so that the moving scenes keep their animation."""
+def shot_kind(seed, args):
+    """"locked" (nothing moves but the noise), "light" (only the light changes)
+    or "moving", for --locked-off and --light-only shares of the seeds. Drawn
+    apart from the rest, so that a moving scene's animation does not depend
+    on the shares."""
     r = random.Random(gen.derived_seed("stillness", seed)).random()
-    return "locked" if r < 0.25 else "light" if r < 0.35 else "moving"
+    return "locked" if r < args.locked_off else "light" if r < args.locked_off + args.light_only else "moving"
 
 
 def animate_scene(args, seed, photos):
@@ -168,7 +172,7 @@ def animate_scene(args, seed, photos):
     zoom = math.exp(arng.uniform(0.0, math.log(5.0)))  # a crop of a frame up to 5x as wide
     cam.data.lens *= zoom
     still = arng.random() < 0.4
-    stillness = shot_kind(seed)
+    stillness = shot_kind(seed, args)
     still = still or stillness != "moving"
     animate_camera(cam, target, path, args.frames, still)
     extent = max((o.location.length for o in movable_objects(description)), default=1.0)
