@@ -51,6 +51,7 @@ Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int
   for (const LightPassTerm& term : layout.terms) {
     const Image tint =
         term.color.empty() ? Image() : readImage(path, 3, layout.channels.at(term.color));
+    if (!tint.empty() && !tint.sameShape(color)) return Image();
     for (const std::string& key : term.lights) {
       const LightPassSpec* spec = layout.rule->find(key);
       if (!spec || !spec->viewDependent) continue;

@@ -605,6 +605,9 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   if (centre >= window.size() || !window[centre])
     throw std::invalid_argument("filterFrame: the centre frame is missing");
   const WindowFrame& current = *window[centre];
+  if (!current.viewDependent.empty() &&
+      current.viewDependent.pixelCount() != current.denoised.pixelCount())
+    throw std::invalid_argument("filterFrame: the view-dependent share differs in size");
   // The neighbours in order (the past nearest first, then the future), each
   // with the chain of frames its motion is followed along; a gap ends a side.
   struct Neighbour {
