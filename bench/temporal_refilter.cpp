@@ -22,6 +22,7 @@
 #include "common/sequence.h"
 #include "dn/io/frame_pattern.h"
 #include "dn/io/npy.h"
+#include "dn/passes/sequence_passes.h"
 #include "dn/temporal/sequence.h"
 
 using namespace dn;
@@ -64,6 +65,9 @@ int main(int argc, char** argv) {
     settings.filter.threads = static_cast<int>(std::thread::hardware_concurrency());
     // The results are read, not denoised: the filter alone (dndenoise --temporal filter).
     settings.filter.accumulatedShare = 0.0;
+    settings.viewDependentShare = [](const std::string& path, const FrameBuffers& frame) {
+      return viewDependentShare(path, frame);
+    };
     while (!args.done()) {
       if (args.flag("-o")) {
         output = args.value("-o");

@@ -9,7 +9,7 @@ filter see real buffers.
 
   temporal_speed.py --bin build/bin --shot /work/data/shots/room_dolly [--spp 4]
                     [--frames 6] [--tiles 15x11] [--rounds 1] [--threads 2] [--no-oidn]
-                    [--passes]
+                    [--passes] [--modes off on]
 
 --passes: the same with the light passes (dndenoise --passes, a multilayer
 result; the shot must have them): frame by frame, and on the sequence with the
@@ -61,6 +61,8 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-oidn", action="store_true", help="leave out OIDN's prefilter mode")
     ap.add_argument("--passes", action="store_true", help="with --passes (no OIDN)")
+    ap.add_argument("--modes", nargs="+", default=["off", "filter", "on"], choices=["off", "filter", "on"],
+                    help="the --temporal settings run (off is the baseline)")
     args = ap.parse_args()
     tiles = tuple(int(v) for v in args.tiles.split("x"))
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,7 +77,7 @@ def main():
         output = ["--passes"] if args.passes else ["--rgb-only"]
         runs = {f"--temporal {mode}": [dndenoise, pattern, "-o", os.path.join(tmp, f"{mode}.#.exr"),
                                        *output, "--temporal", mode, "--threads", str(args.threads)]
-                for mode in ("off", "filter", "on")}
+                for mode in dict.fromkeys(["off"] + args.modes)}
         if not args.no_oidn and not args.passes:
             runs["OIDN prefilter"] = [sys.executable, os.path.join(HERE, "..", "experiments", "oidn_denoise.py"),
                                       *frames, "-o", os.path.join(tmp, "oidn") + "/", "--prefilter",

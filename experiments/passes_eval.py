@@ -47,7 +47,8 @@ recombined) against the reference regraded the same way, and each dndenoise
 run's wall time (whole process).
 
   python3 experiments/passes_eval.py --shots SHOT... [--spp 4] [--window 4]
-                                     [--threads N] [--work DIR]
+                                     [--threads N] [--work DIR] [--methods fbf seq ...]
+                                     [--dndenoise-args=--temporal-trust=learned]
 """
 
 import argparse
@@ -341,7 +342,7 @@ def run_sequence(args, shot, spp, method, out_dir):
         return None
     cmd = [os.path.join(args.bin, "dndenoise"), "--passes", os.path.join(shot, f"spp{spp}.#.exr"),
            "-o", os.path.join(out_dir, "out.#.exr"), "--window", str(args.window),
-           "--frames", f"{frames[0]}-{frames[-1]}"] + SEQUENCE_METHODS[method]
+           "--frames", f"{frames[0]}-{frames[-1]}"] + SEQUENCE_METHODS[method] + args.dndenoise_args
     if args.threads:
         cmd += ["--threads", str(args.threads)]
     start = time.time()
@@ -397,7 +398,7 @@ def evaluate_shots(args):
             frames_ref.append((found, beauty))
         terms = usable_terms(frames_ref[0][0])
         results[name] = {}
-        for method in list(SEQUENCE_METHODS) + ["oidn_pre"]:
+        for method in args.methods:
             seconds = None
             if method in SEQUENCE_METHODS:
                 seconds = run_sequence(args, shot, args.spp, method, os.path.join(args.work, name, method))
@@ -438,6 +439,10 @@ def main():
     ap.add_argument("--spp", type=int, default=4, help="--shots: the sample count scored")
     ap.add_argument("--window", type=int, default=4, help="--shots: dndenoise --window")
     ap.add_argument("--threads", type=int, default=0, help="--shots: dndenoise and OIDN threads (0: all)")
+    ap.add_argument("--methods", nargs="+", default=list(SEQUENCE_METHODS) + ["oidn_pre"],
+                    help="--shots: the methods run (fbf first)")
+    ap.add_argument("--dndenoise-args", nargs="*", default=[],
+                    help="--shots: more dndenoise arguments for every run, e.g. --temporal-trust learned")
     ap.add_argument("--bin", default=os.path.join(ROOT, "build/bin"))
     ap.add_argument("--renders", default="/work/data/passes/renders")
     ap.add_argument("--work", default="/work/data/passes/eval")

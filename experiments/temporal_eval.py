@@ -129,7 +129,7 @@ def denoise(args, scene, spp, method, out):
     mode = "off" if method == "fbf" else "on"
     cmd = [args.dndenoise, "--model", args.model, pattern, "-o", os.path.join(target, f"spp{spp}.#.exr"),
            "--rgb-only", "--float", "--temporal", mode, "--window", str(args.window), "-v",
-           "--frames", f"1-{last}"] + threads
+           "--frames", f"1-{last}"] + threads + (args.dndenoise_args if method == "temporal" else [])
     return run(cmd, log=os.path.join(out, method + ".log"))[0]
 
 
@@ -269,6 +269,8 @@ def main():
     ap.add_argument("--trust", default="",
                     help="the filter alone with this learned trust (dntrain trust's output); the "
                          "temporal default takes the one --model carries, if any")
+    ap.add_argument("--dndenoise-args", nargs="*", default=[],
+                    help="more dndenoise arguments for the temporal default, e.g. --temporal-trust=learned")
     ap.add_argument("--scenes", nargs="+", default=["still", "object", "pan", "light"])
     ap.add_argument("--spp", type=int, nargs="+", default=[4, 16])
     ap.add_argument("--window", type=int, default=4)

@@ -1,13 +1,14 @@
 """Animated random scenes for learning the temporal filter's trust (Blender 5 Cycles).
 
-  /work/venv-bpy/bin/python scenegen/animate.py --seeds 0-23 --out DATA/anim
+  /work/venv-bpy/bin/python scenegen/animate.py --seeds 0-23 --out DATA/anim --frames 7 --target-spp 32
 
 Each seed builds a scene of generate.py (its archetypes, materials and lights)
 and animates it the way shots fail a temporal filter: one to three objects
 slide and turn (most given metal, plastic or coated surfaces, whose
 reflections do not follow their motion), a sun swings or a lamp moves (shadows
 sweeping still surfaces) or a light dims, and the camera follows its move or
-stands still. A longer lens on some scenes frames a crop of a wider shot, so
+stands still. With --locked-off and --light-only, that share of the scenes
+has nothing moving but the noise, or only its light changing. A longer lens on some scenes frames a crop of a wider shot, so
 that motion and detail come at the scale of 1080p pixels.
 
 Per frame 1..FRAMES, with the Vector pass and the feature passes, the noise
@@ -44,6 +45,10 @@ def parse_args():
     p.add_argument("--spp", default="4,16", help="the inputs' samples per pixel")
     p.add_argument("--target-spp", type=int, default=64)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--locked-off", type=float, default=0.0,
+                   help="the share of scenes where nothing moves but the noise (0.25 in the trust tried with them)")
+    p.add_argument("--light-only", type=float, default=0.0,
+                   help="the share of scenes where only the light changes (0.10 beside --locked-off 0.25)")
     args = p.parse_args(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:])
     first, last = (int(v) for v in args.seeds.split("-"))
     args.seed_list = list(range(first, last + 1))
@@ -99,10 +104,10 @@ def animate_objects(rng, mats, objects, frames, extent):
     return moved
 
 
-def animate_light(rng, frames):
+def animate_light(rng, frames, weights=(35, 50, 15)):
     """A sun swings, a lamp moves, or a light dims; or nothing (None)."""
     lights = [o for o in bpy.data.objects if o.type == "LIGHT"]
-    choice = rng.choices(["none", "move", "dim"], weights=[35, 50, 15])[0]
+    choice = rng.choices(["none", "move", "dim"], weights=weights)[0]
     if not lights or choice == "none":
         return None
     light = rng.choice(lights)
@@ -143,6 +148,15 @@ def render(scene, path, samples, seed):
     gen.render_to(path, scene, samples, seed, "16")
 
 
+def shot_kind(seed, args):
+    """"locked" (nothing moves but the noise), "light" (only the light changes)
+    or "moving", for --locked-off and --light-only shares of the seeds. Drawn
+    apart from the rest, so that a moving scene's animation does not depend
+    on the shares."""
+    r = random.Random(gen.derived_seed("stillness", seed)).random()
+    return "locked" if r < args.locked_off else "light" if r < args.locked_off + args.light_only else "moving"
+
+
 def animate_scene(args, seed, photos):
     folder = os.path.join(args.out, "scene_%04d" % seed)
     names = ["spp%d.%04d.exr" % (s, k) for k in range(1, args.frames + 1) for s in args.spp_list]
@@ -158,12 +172,17 @@ def animate_scene(args, seed, photos):
     zoom = math.exp(arng.uniform(0.0, math.log(5.0)))  # a crop of a frame up to 5x as wide
     cam.data.lens *= zoom
     still = arng.random() < 0.4
+    stillness = shot_kind(seed, args)
+    still = still or stillness != "moving"
     animate_camera(cam, target, path, args.frames, still)
     extent = max((o.location.length for o in movable_objects(description)), default=1.0)
     mats = gen.MaterialFactory(arng, photos)
-    animation = {"zoom": round(zoom, 3), "camera": "still" if still else path[4],
-                 "objects": animate_objects(arng, mats, movable_objects(description), args.frames, extent),
-                 "light": animate_light(arng, args.frames)}
+    animation = {"zoom": round(zoom, 3), "camera": "still" if still else path[4], "kind": stillness}
+    if stillness == "moving":
+        animation["objects"] = animate_objects(arng, mats, movable_objects(description), args.frames, extent)
+        animation["light"] = animate_light(arng, args.frames)
+    elif stillness == "light":
+        animation["light"] = animate_light(arng, args.frames, weights=(0, 75, 25))
     scene.frame_start, scene.frame_end = 1, args.frames
     os.makedirs(folder, exist_ok=True)
     gen.write_json(os.path.join(folder, "scene.json"),

@@ -747,6 +747,73 @@ TEST_CASE("temporal filter: a light pass filtered with the results' weights flic
 
 namespace {
 
+// A still shot's light pass per frame (`share` of the light), with a leftover
+// error of its own, as a pass denoised alone.
+std::vector<Image> stillPass(const Synthetic& truth, unsigned count, float share, unsigned seed) {
+  std::vector<Image> out;
+  for (unsigned t = 0; t < count; ++t) {
+    out.push_back(stillFrame(truth, seed + t, seed + 100 + t).denoised);
+    for (float& v : out.back().pixels) v *= share;
+  }
+  return out;
+}
+
+std::vector<const Image*> pointersTo(const std::vector<Image>& images) {
+  std::vector<const Image*> out;
+  for (const Image& image : images) out.push_back(&image);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("a view-dependent pass takes a neighbour only where the surface stood still") {
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  const std::vector<temporal::WindowFrame> still = stillShot(truth, 3, 1000, 1100);
+  const std::vector<Image> pass = stillPass(truth, 3, 0.5f, 1200);
+  // Still: the gate changes nothing, bit for bit.
+  const temporal::FilterWeights stillWeights = temporal::filterFrame(windowOf(still), 1).weights;
+  REQUIRE(stillWeights.neighbours.size() == 2);
+  const std::vector<const Image*> images = pointersTo(pass);
+  CHECK(temporal::filterWith(stillWeights, images, 0.5).pixels ==
+        temporal::filterWith(stillWeights, images).pixels);
+  // A pan of a pixel a frame: the frame's own pass, bit for bit.
+  std::vector<temporal::WindowFrame> pan;
+  for (int t = 0; t < 3; ++t) {
+    pan.push_back(stillFrame(makeFrame(32, 24, t, 0), 40 + t, 50 + t));
+    pan.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+  }
+  const temporal::FilterWeights panWeights = temporal::filterFrame(windowOf(pan), 1).weights;
+  REQUIRE(panWeights.neighbours.size() == 2);
+  CHECK(temporal::filterWith(panWeights, images, 0.5).pixels == pass[1].pixels);
+}
+
+TEST_CASE(
+    "temporal filter: light that moves with the view is taken only where surfaces stood still") {
+  std::vector<temporal::WindowFrame> pan;
+  for (int t = 0; t < 3; ++t) {
+    pan.push_back(stillFrame(makeFrame(32, 24, t, 0), 60 + t, 70 + t));
+    pan.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+  }
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> still = stillShot(truth, 3, 1300, 1400);
+  for (auto* frames : {&pan, &still}) {
+    const temporal::TemporalResult unknown = temporal::filterFrame(windowOf(*frames), 1);
+    (*frames)[1].viewDependent = Image(32, 24, 1, 0.0f);
+    CHECK(temporal::filterFrame(windowOf(*frames), 1).color.pixels == unknown.color.pixels);
+    (*frames)[1].viewDependent = Image(32, 24, 1, 1.0f);
+    const temporal::TemporalResult mirror = temporal::filterFrame(windowOf(*frames), 1);
+    if (frames == &still) {
+      CHECK(mirror.color.pixels == unknown.color.pixels);
+    } else {
+      // A pixel a frame: an all-mirror frame is its own result alone.
+      CHECK(mirror.color.pixels == (*frames)[1].denoised.pixels);
+      CHECK(unknown.color.pixels != (*frames)[1].denoised.pixels);
+    }
+  }
+}
+
+namespace {
+
 // A learned trust whose every weight is the logistic of `bias` (no weight
 // on any feature): 12 -> 1.
 temporal::LearnedTrust constantTrust(float bias) {

@@ -15,6 +15,7 @@
 #include "dn/metrics.h"
 #include "dn/passes/joint_denoise.h"
 #include "dn/passes/light_passes.h"
+#include "dn/passes/sequence_passes.h"
 
 using namespace dn;
 
@@ -110,6 +111,33 @@ TEST_CASE("Blender 5 multi-part full names; a pass the file lacks goes to the re
   CHECK(meanAbs(expected) > 0.05 * meanAbs(frame.get("color")));
   CHECK(maxRelativeDifference(passes.at(kResidualPass), expected, 1e-2) < 1e-3);
   CHECK(maxRelativeDifference(recombine(lacking, passes), frame.get("color")) < 1e-5);
+}
+
+TEST_CASE("the view-dependent share: glossy and transmitted light over the render's") {
+  const FrameBuffers frame = readFrame(kBlender5);
+  const LightPassImages passes =
+      readLightPasses(kBlender5, findLightPasses(channelNames(kBlender5), "ViewLayer."), frame);
+  const Image share = viewDependentShare(kBlender5, frame, 0);
+  REQUIRE(share.sameShape(Image(frame.width, frame.height, 1)));
+  const Image& color = frame.get("color");
+  double largest = 0.0;
+  for (std::size_t i = 0; i < share.pixels.size(); ++i) {
+    double moving = 0.0, all = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      for (const char* term : {"glossy", "transmission"})
+        for (const char* part : {"_direct", "_indirect"})
+          moving += std::max(0.0f, passes.at(std::string(term) + part).pixels[3 * i + c] *
+                                       passes.at(std::string(term) + "_color").pixels[3 * i + c]);
+      all += std::max(0.0f, color.pixels[3 * i + c]);
+    }
+    const double expected = all > 0.0 ? std::min(1.0, moving / all) : 0.0;
+    CHECK(share.pixels[i] == doctest::Approx(expected).epsilon(1e-5));
+    largest = std::max(largest, expected);
+  }
+  CHECK(largest > 0.5);  // the HDRI's chrome
+  // Averaged over a box it stays a share; a file without passes has none.
+  for (float v : viewDependentShare(kBlender5, frame).pixels) CHECK((v >= 0.0f && v <= 1.0f));
+  CHECK(viewDependentShare(kMitsuba, readFrame(kMitsuba)).empty());
 }
 
 TEST_CASE("a light pass without its colour pass is not used, and says so") {

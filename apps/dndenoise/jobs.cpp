@@ -11,6 +11,7 @@
 #include "common/sequence.h"
 #include "dn/io/frame_pattern.h"
 #include "dn/io/preview_io.h"
+#include "dn/passes/sequence_passes.h"
 
 namespace fs = std::filesystem;
 
@@ -110,6 +111,9 @@ std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& j
   if (trust != notes.end() && o.temporalTrust == "learned")
     settings.filter.learnedTrust = std::make_shared<const temporal::LearnedTrust>(
         temporal::LearnedTrust::fromText(trust->second));
+  settings.viewDependentShare = [](const std::string& path, const FrameBuffers& frame) {
+    return viewDependentShare(path, frame);
+  };
   std::vector<std::string> files;
   for (const auto& job : jobs) files.push_back(job.first);
   std::string frameByFrame;

@@ -73,31 +73,6 @@ Image denoiseSigned(const OidnBase& base, const Image& pass, const Image& albedo
   return out;
 }
 
-// Mean over a (2r+1)^2 box, per channel, clamped at the borders.
-Image boxMean(const Image& image, int r) {
-  if (r <= 0) return image;
-  Image rows(image.width, image.height, image.channels), out = rows;
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x)
-      for (int c = 0; c < image.channels; ++c) {
-        double s = 0;
-        int n = 0;
-        for (int k = std::max(0, x - r); k <= std::min(image.width - 1, x + r); ++k, ++n)
-          s += image.at(k, y, c);
-        rows.at(x, y, c) = float(s / n);
-      }
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x)
-      for (int c = 0; c < image.channels; ++c) {
-        double s = 0;
-        int n = 0;
-        for (int k = std::max(0, y - r); k <= std::min(image.height - 1, y + r); ++k, ++n)
-          s += rows.at(x, k, c);
-        out.at(x, y, c) = float(s / n);
-      }
-  return out;
-}
-
 // One part of the beauty: a light pass (times its term's colour) or the residual.
 struct Part {
   std::string key;
@@ -187,6 +162,30 @@ void closeResidual(const LightPassLayout& layout, LightPassImages& passes, const
 }
 
 }  // namespace
+
+Image boxMean(const Image& image, int r) {
+  if (r <= 0) return image;
+  Image rows(image.width, image.height, image.channels), out = rows;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      for (int c = 0; c < image.channels; ++c) {
+        double s = 0;
+        int n = 0;
+        for (int k = std::max(0, x - r); k <= std::min(image.width - 1, x + r); ++k, ++n)
+          s += image.at(k, y, c);
+        rows.at(x, y, c) = float(s / n);
+      }
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      for (int c = 0; c < image.channels; ++c) {
+        double s = 0;
+        int n = 0;
+        for (int k = std::max(0, y - r); k <= std::min(image.height - 1, y + r); ++k, ++n)
+          s += rows.at(x, k, c);
+        out.at(x, y, c) = float(s / n);
+      }
+  return out;
+}
 
 LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& frame,
                                    const LightPassLayout& layout, const LightPassImages& noisy,

@@ -30,11 +30,11 @@ LightPassRule cyclesRule() {
       {"diffuse_direct", {"DiffDir", "Diffuse Direct"}, false},
       {"diffuse_indirect", {"DiffInd", "Diffuse Indirect"}, false},
       {"diffuse_color", {"DiffCol", "Diffuse Color"}, true},
-      {"glossy_direct", {"GlossDir", "Glossy Direct"}, false},
-      {"glossy_indirect", {"GlossInd", "Glossy Indirect"}, false},
+      {"glossy_direct", {"GlossDir", "Glossy Direct"}, false, true},
+      {"glossy_indirect", {"GlossInd", "Glossy Indirect"}, false, true},
       {"glossy_color", {"GlossCol", "Glossy Color"}, true},
-      {"transmission_direct", {"TransDir", "Transmission Direct"}, false},
-      {"transmission_indirect", {"TransInd", "Transmission Indirect"}, false},
+      {"transmission_direct", {"TransDir", "Transmission Direct"}, false, true},
+      {"transmission_indirect", {"TransInd", "Transmission Indirect"}, false, true},
       {"transmission_color", {"TransCol", "Transmission Color"}, true},
       {"volume_direct", {"VolumeDir", "Volume Direct"}, false},
       {"volume_indirect", {"VolumeInd", "Volume Indirect"}, false},
@@ -79,7 +79,10 @@ LightPassRule arnoldRule() {
                                           "volume",
                                           "emission",
                                           "background"};
-  for (const auto& name : names) rule.passes.push_back({"arnold_" + name, {name}, false});
+  const std::set<std::string> viewDependent = {"specular_direct", "specular_indirect", "coat",
+                                               "transmission"};
+  for (const auto& name : names)
+    rule.passes.push_back({"arnold_" + name, {name}, false, viewDependent.count(name) > 0});
   rule.terms = {
       {"diffuse", {"arnold_diffuse_direct", "arnold_diffuse_indirect"}, ""},
       {"specular", {"arnold_specular_direct", "arnold_specular_indirect"}, ""},

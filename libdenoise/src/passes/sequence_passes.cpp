@@ -1,10 +1,17 @@
 #include "dn/passes/sequence_passes.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "dn/io/buffer_io.h"
 
 namespace dn {
 
+using temporal::Companion;
+
 namespace {
+
+float finiteOr0(float v) { return std::isfinite(v) ? v : 0.0f; }
 
 bool filteredOverTime(const LightPassLayout& layout, const std::string& key,
                       PassesOverTime overTime) {
@@ -25,11 +32,49 @@ temporal::Sequence::MakeCompanions lightPassCompanions(const OidnBase& base,
     const LightPassImages passes =
         denoisePassesApart(base, frame, layout, readLightPasses(path, layout, frame), apart);
     temporal::Companions companions;
-    for (const auto& [key, image] : passes)
-      companions[key] = {image,
-                         key != kResidualPass && filteredOverTime(layout, key, options.overTime)};
+    for (const auto& [key, image] : passes) {
+      Companion& companion = companions[key];
+      companion.image = image;
+      companion.overTime = key != kResidualPass && filteredOverTime(layout, key, options.overTime);
+      const LightPassSpec* spec = layout.rule->find(key);
+      companion.viewDependent = spec && spec->viewDependent;
+    }
     return companions;
   };
+}
+
+Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius) {
+  const LightPassLayout layout = findLightPasses(channelNames(path), layerPrefixOf(frame));
+  const Image& color = frame.get("color");
+  Image moving(color.width, color.height, 1), all(color.width, color.height, 1);
+  bool found = false;
+  for (const LightPassTerm& term : layout.terms) {
+    const Image tint =
+        term.color.empty() ? Image() : readImage(path, 3, layout.channels.at(term.color));
+    if (!tint.empty() && !tint.sameShape(color)) return Image();
+    for (const std::string& key : term.lights) {
+      const LightPassSpec* spec = layout.rule->find(key);
+      if (!spec || !spec->viewDependent) continue;
+      const Image light = readImage(path, 3, layout.channels.at(key));
+      if (!light.sameShape(color)) return Image();  // readLightPasses names it, when asked for
+      for (std::size_t i = 0; i < color.pixelCount(); ++i)
+        for (int c = 0; c < 3; ++c) {
+          const float v = finiteOr0(light.pixels[3 * i + c]) *
+                          (tint.empty() ? 1.0f : finiteOr0(tint.pixels[3 * i + c]));
+          moving.pixels[i] += std::max(v, 0.0f) / 3;
+        }
+      found = true;
+    }
+  }
+  if (!found) return Image();
+  for (std::size_t i = 0; i < color.pixelCount(); ++i)
+    for (int c = 0; c < 3; ++c)
+      all.pixels[i] += std::max(finiteOr0(color.pixels[3 * i + c]), 0.0f) / 3;
+  moving = boxMean(moving, radius), all = boxMean(all, radius);
+  for (std::size_t i = 0; i < moving.pixels.size(); ++i)
+    moving.pixels[i] =
+        all.pixels[i] > 0.0f ? std::clamp(moving.pixels[i] / all.pixels[i], 0.0f, 1.0f) : 0.0f;
+  return moving;
 }
 
 PassesResult passesOfSequenceFrame(const std::string& path, const FrameBuffers& frame,

@@ -112,6 +112,8 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   const FrameBuffers& frame = given ? *given : entry->buffers;
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = guidesOf(frame, path, settings_.read);
+  if (settings_.viewDependentShare)
+    entry->frame.viewDependent = settings_.viewDependentShare(path, frame);
   std::optional<motion::MotionField> field =
       settings_.motion.empty()
           ? motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer)
@@ -246,7 +248,8 @@ std::map<std::string, Image> Sequence::filteredCompanions(int number, const Fram
       auto it = companions->find(name);
       if (it != companions->end()) images[index] = &it->second.image;
     }
-    out[name] = filterWith(weights, images);
+    out[name] =
+        filterWith(weights, images, own.viewDependent ? settings_.filter.viewDependentMotion : 0.0);
   }
   return out;
 }

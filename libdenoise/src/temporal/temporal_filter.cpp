@@ -488,6 +488,16 @@ std::vector<float> trustFeatures(const Centre& centre, const Contribution& k,
   return out;
 }
 
+// TemporalOptions::viewDependentMotion.
+void applyViewDependence(Contribution& k, const Image& share, double pixels) {
+  if (share.empty() || k.weight.empty() || pixels <= 0.0) return;
+  const Image still = stillness(k.resampling.positions, pixels);
+  for (std::size_t i = 0; i < k.weight.size(); ++i) {
+    const double s = share.pixels[i];
+    k.weight[i] *= 1.0 - s + s * still.pixels[i];
+  }
+}
+
 void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
                        const LearnedTrust& trust) {
   for (std::size_t i = 0; i < k.weight.size(); ++i) {
@@ -595,6 +605,9 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   if (centre >= window.size() || !window[centre])
     throw std::invalid_argument("filterFrame: the centre frame is missing");
   const WindowFrame& current = *window[centre];
+  if (!current.viewDependent.empty() &&
+      current.viewDependent.pixelCount() != current.denoised.pixelCount())
+    throw std::invalid_argument("filterFrame: the view-dependent share differs in size");
   // The neighbours in order (the past nearest first, then the future), each
   // with the chain of frames its motion is followed along; a gap ends a side.
   struct Neighbour {
@@ -637,6 +650,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     applyColourTest(contributions[n], referenceMapped, c, options);
     if (options.learnedTrust && !features[n].empty())
       applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
+    applyViewDependence(contributions[n], current.viewDependent, options.viewDependentMotion);
   });
   if (options.observeTrust) {
     TrustSamples samples{current.denoised, c.scale, {}, {}, {}, {}};
@@ -677,12 +691,13 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   return result;
 }
 
-Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images) {
+Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
+                 double stillPixels) {
   if (weights.centre >= images.size() || !images[weights.centre])
     throw std::invalid_argument("filterWith: the centre frame's image is missing");
   const Image& own = *images[weights.centre];
   std::vector<Image> moved;
-  std::vector<const NeighbourWeights*> used;
+  std::vector<std::vector<double>> used;
   for (const NeighbourWeights& nb : weights.neighbours) {
     const Image* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
     if (!image || !image->sameShape(own)) continue;
@@ -690,10 +705,14 @@ Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& 
     if (nb.relit)
       in = scaled(std::move(in), relightFactor(in, own, nb.resampling.trust, weights.relightBox));
     moved.push_back(std::move(in));
-    used.push_back(&nb);
+    used.push_back(nb.weight);
+    if (stillPixels > 0.0) {
+      const Image still = stillness(nb.resampling.positions, stillPixels);
+      for (std::size_t i = 0; i < used.back().size(); ++i) used.back()[i] *= still.pixels[i];
+    }
   }
   std::vector<Weighted> others;
-  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]->weight});
+  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]});
   return toImage(weightedMean(own, others).value, own);
 }
 

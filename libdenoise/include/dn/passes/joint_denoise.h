@@ -98,6 +98,9 @@ std::map<std::string, Image> denoisedPassLayers(const LightPassLayout& layout,
 // passes or `frame` lacks albedo and normal.
 LightPassLayout passLayoutOfFrame(const std::string& path, const FrameBuffers& frame);
 
+// Mean over a (2r+1)^2 box, per channel, the box clipped at the borders.
+Image boxMean(const Image& image, int r);
+
 // For dndenoise --passes: the file's light passes found, read, denoised
 // against `denoisedBeauty` and named for writing. Throws IoError with one line
 // naming `path` when it has no light passes or lacks albedo and normal.

@@ -19,6 +19,9 @@ struct LightPassSpec {
   std::string key;                  // renderer-independent name, e.g. "diffuse_direct"
   std::vector<std::string> layers;  // layer names tried in order, e.g. "DiffDir", "Diffuse Direct"
   bool isColor = false;             // a colour (albedo-like) pass that multiplies light passes
+  // Reflected or refracted light: it moves with the view and the light, not
+  // with the surface the motion vectors follow.
+  bool viewDependent = false;
 };
 
 // One term of the sum: the light passes added, times the colour pass when

@@ -2,8 +2,9 @@
 // motion vectors): each frame's passes denoised alone, as for one frame, then
 // filtered over the window with the beauty's weights (the same neighbours,
 // reprojection and per-pixel weights: dn::temporal::Sequence's companions),
-// and the residual set to the frame's denoised beauty minus the rest, so the
-// renderer's rule still holds exactly. The residual then holds what the
+// the view-dependent passes (glossy, transmission) only where the surface
+// stood still on screen, and the residual set to the frame's denoised beauty
+// minus the rest, so the renderer's rule still holds exactly. The residual then holds what the
 // passes do not explain (the beauty's denoised history blended in), not
 // their flicker.
 #pragma once
@@ -34,6 +35,13 @@ struct SequencePassOptions {
 // when it has no light passes or lacks albedo and normal.
 temporal::Sequence::MakeCompanions lightPassCompanions(const OidnBase& base,
                                                        const SequencePassOptions& options);
+
+// Per pixel, the share of `frame`'s light (its colour) in the view-dependent
+// passes of `path` (LightPassSpec::viewDependent: glossy and transmission,
+// each times its term's colour), both averaged over a (2 radius + 1)^2 box of
+// the noisy render, in [0, 1]: the temporal filter's
+// WindowFrame::viewDependent. Empty where the file has no such passes.
+Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius = 2);
 
 // The frame's passes as filtered (Sequence's companions of lightPassCompanions)
 // made to recombine to `denoisedBeauty`, and named for writing.

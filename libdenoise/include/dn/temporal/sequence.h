@@ -31,6 +31,9 @@ struct SequenceSettings {
   std::string motion;      // motion vectors from separate files: a pattern (mv.#.exr)
   ReadOptions read;        // the view layer and channel overrides
   TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
+  // Where set, a frame's WindowFrame::viewDependent, from its file and its
+  // buffers as Read gives them (empty where the file cannot tell).
+  std::function<Image(const std::string& path, const FrameBuffers& frame)> viewDependentShare;
   // Unset: the filter runs on the CPU (temporal_filter.h; its output does not
   // change). Set: as tensor operations on this device (device_filter.h), each
   // frame copied there once and kept while in the window, the colour copied
@@ -43,6 +46,9 @@ struct SequenceSettings {
 struct Companion {
   Image image;           // the frame's size, any channel count
   bool overTime = true;  // false: kept as made
+  // Light that moves with the view (a glossy pass): its neighbours count only
+  // where the surface stood still (TemporalOptions::viewDependentMotion).
+  bool viewDependent = false;
 };
 using Companions = std::map<std::string, Companion>;
 

@@ -33,6 +33,10 @@ struct WindowFrame {
   Image history;
   motion::Guides guides;
   motion::MotionField motion;
+  // Per pixel, the share of the render's light that moves with the view, not
+  // the surface (reflected and refracted: a renderer's glossy and
+  // transmission passes); 1 channel in [0, 1], empty where unknown.
+  Image viewDependent;
 };
 
 // What the learned trust sees of a frame's neighbours, for fitting it
@@ -93,6 +97,14 @@ struct TemporalOptions {
   // it moved, each was resampled on its way in and its errors follow the
   // filtered results' (the tuning half lost 0.1-0.2 dB at 16 spp without it).
   double historyMotion = 0.5;
+  // A reflection on a turning bottle, a highlight as the camera dollies:
+  // light that moves with the view arrives misplaced from a neighbour whose
+  // surface moved on screen, however well the surface is brought in, and no
+  // per-pixel test at the render's noise tells it from the leftover errors.
+  // Where the frame knows its view-dependent share, that share of each
+  // neighbour's weight falls linearly to nothing at this many pixels of
+  // motion (0: off).
+  double viewDependentMotion = 0.5;
   int threads = 1;  // neighbours brought in at once; the result does not depend on it
   // Where set, each neighbour's weight per pixel after the tests above is
   // multiplied by this network's: it takes trust away where they pass what
@@ -168,7 +180,11 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
 // an image's own values would overshoot below 0, so with the past's histories
 // stacked in, a pixel where theirs did may differ). Throws
 // std::invalid_argument when the centre's image is missing.
-Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images);
+// `stillPixels` above 0: each neighbour's weight also falls linearly to 0 at
+// that much motion on screen, for an image of light that moves with the view,
+// not the surface (TemporalOptions::viewDependentMotion).
+Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
+                 double stillPixels = 0.0);
 
 // The frame's accumulated render, denoised (`own`), averaged with its past
 // neighbours' as its result was with theirs where the surface stood still,
