@@ -366,6 +366,41 @@ TEST_CASE("device filter: its weights filter another image as on the CPU") {
   CHECK_THROWS_AS(filterWith(b.device.weights, noCentre), std::invalid_argument);
 }
 
+TEST_CASE("device filter: light that moves with the view counts where the surface stood still") {
+  // A pan with an occluder, its view-dependent share rising across the frame.
+  std::vector<WindowFrame> frames = shot(5, 0.5f, 3, 8, 1800);
+  for (WindowFrame& f : frames) {
+    f.viewDependent = Image(f.denoised.width, f.denoised.height, 1);
+    for (int y = 0; y < f.viewDependent.height; ++y)
+      for (int x = 0; x < f.viewDependent.width; ++x)
+        f.viewDependent.at(x, y, 0) = float(x) / f.viewDependent.width;
+  }
+  // Partly still: the pan moves 0.5 px a frame, the share falls to nothing at 2.
+  TemporalOptions options;
+  options.viewDependentMotion = 2.0;
+  const Both b = filterBoth(windowOf(frames), 2, options);
+  checkSameFilter("view-dependent share", b);
+  const Both without = filterBoth(windowOf(shot(5, 0.5f, 3, 8, 1800)), 2, options);
+  CHECK(b.cpu.stats.historyShare < without.cpu.stats.historyShare);  // the share took weight
+  // A glossy pass filtered over time counts its neighbours where the surface stood still only.
+  std::vector<torch::Tensor> results;
+  std::vector<const Image*> hostResults;
+  for (std::size_t t = 0; t < frames.size(); ++t) {
+    results.push_back(b.frames[t].denoised);
+    hostResults.push_back(&frames[t].denoised);
+  }
+  std::vector<const torch::Tensor*> pointers;
+  for (const torch::Tensor& r : results) pointers.push_back(&r);
+  const Image& own = frames[2].denoised;
+  const Image pass = filterWith(b.cpu.weights, hostResults, 2.0);
+  CHECK(pass.pixels != own.pixels);
+  checkAgrees("a view-dependent pass by the weights",
+              pixelsToImage(filterWith(b.device.weights, pointers, 2.0), own.width, own.height),
+              pass);
+  frames[2].viewDependent = Image(4, 4, 1);
+  CHECK_THROWS_AS(filterBoth(windowOf(frames), 2, options), std::invalid_argument);
+}
+
 TEST_CASE("device filter: motion of another size throws as on the CPU") {
   std::vector<WindowFrame> frames = shot(3, 0.0f, 0, 0, 1700);
   frames[2].motion = motionOf(Scene{16, 12}, 0.0f, 0.0f);

@@ -27,11 +27,11 @@ struct Grid {
   std::int64_t pixels() const { return std::int64_t(width) * height; }
 };
 
-Grid gridOf(const DeviceFrame& frame) {
-  const auto options = frame.denoised.options();
-  const Tensor xs = torch::arange(frame.width, options), ys = torch::arange(frame.height, options);
+// `options`: float on the frames' device.
+Grid gridOf(int width, int height, const torch::TensorOptions& options) {
+  const Tensor xs = torch::arange(width, options), ys = torch::arange(height, options);
   const auto xy = torch::meshgrid({ys, xs}, "ij");
-  return {frame.width, frame.height, xy[1].reshape(-1), xy[0].reshape(-1)};
+  return {width, height, xy[1].reshape(-1), xy[0].reshape(-1)};
 }
 
 // `values` where `keep` holds, else 0.
@@ -445,7 +445,8 @@ Tensor localNoise(const Tensor& residual, int r, const Grid& g) {
 Tensor kth(const Tensor& values, std::int64_t k) { return std::get<0>(torch::kthvalue(values, k)); }
 
 Centre centreOf(const DeviceFrame& frame, const motion::TrustOptions& trust) {
-  Centre c{&frame, gridOf(frame), {}, {}, {}, {}, {}, {}};
+  Centre c{&frame, gridOf(frame.width, frame.height, frame.denoised.options()), {}, {}, {}, {}, {},
+           {}};
   c.scale = exposureOf(frame.denoised, frame.width, frame.height);
   c.mapped = tonemapped(frame.denoised, c.scale);
   c.noisyMapped = tonemapped(frame.noisy, c.scale);
@@ -669,6 +670,14 @@ void applyLearnedTrust(Contribution& k, const Tensor& features, const LearnedTru
   k.weight = torch::where(k.weight > 0, onlyWhere(w > 0, k.weight * w), k.weight);
 }
 
+// TemporalOptions::viewDependentMotion: the view-dependent share of the
+// weight counts only where the surface stood still.
+void applyViewDependence(Contribution& k, const Tensor& share, double pixels, const Grid& g) {
+  if (!share.defined() || !k.used() || pixels <= 0.0) return;
+  const Tensor s = share[0];
+  k.weight = k.weight * (1.0f - s + s * stillness(k.resampling.positions, pixels, g));
+}
+
 // The noisy renders accumulated with the results' weights, at the nearest pixel.
 void accumulateNoisy(const Centre& centre, const std::vector<const DeviceFrame*>& frames,
                      const std::vector<Contribution>& contributions, DeviceTemporalResult& result) {
@@ -797,6 +806,7 @@ DeviceFrame toDevice(const WindowFrame& frame, const torch::Device& device) {
   out.albedo = pixelsToDevice(frame.guides.albedo, device);
   out.normal = pixelsToDevice(frame.guides.normal, device);
   out.depth = pixelsToDevice(frame.guides.depth, device);
+  out.viewDependent = pixelsToDevice(frame.viewDependent, device);
   if (!frame.motion.empty()) {
     out.toPrevious = pixelsToDevice(frame.motion.toPrevious, device);
     out.toNext = pixelsToDevice(frame.motion.toNext, device);
@@ -829,6 +839,9 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
     throw std::invalid_argument("filterFrame: the centre frame is missing");
   torch::NoGradGuard noGrad;
   const DeviceFrame& current = *window[centre];
+  if (current.viewDependent.defined() &&
+      current.viewDependent.numel() != std::int64_t(current.width) * current.height)
+    throw std::invalid_argument("filterFrame: the view-dependent share differs in size");
   const std::vector<Neighbour> neighbours = neighboursOf(window, centre, options.radius);
   const Centre c = centreOf(current, options.trust);
   std::vector<Contribution> contributions;
@@ -854,6 +867,8 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
     applyColourTest(contributions[n], referenceMapped, c, options);
     if (options.learnedTrust && features[n].defined())
       applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
+    applyViewDependence(contributions[n], current.viewDependent, options.viewDependentMotion,
+                        c.grid);
   }
   if (options.observeTrust) observe(c, neighbours, contributions, features, options);
 
@@ -888,24 +903,25 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
 }
 
 torch::Tensor filterWith(const DeviceFilterWeights& weights,
-                         const std::vector<const torch::Tensor*>& images) {
+                         const std::vector<const torch::Tensor*>& images, double stillPixels) {
   if (weights.centre >= images.size() || !images[weights.centre])
     throw std::invalid_argument("filterWith: the centre frame's image is missing");
   torch::NoGradGuard noGrad;
   const Tensor& own = *images[weights.centre];
-  const Grid g{weights.width, weights.height, {}, {}};
-  std::vector<Tensor> moved;
-  std::vector<const DeviceNeighbourWeights*> used;
+  const Grid g = gridOf(weights.width, weights.height, own.options().dtype(torch::kFloat));
+  std::vector<Tensor> moved, used;
   for (const DeviceNeighbourWeights& nb : weights.neighbours) {
     const Tensor* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
     if (!image || !image->defined() || image->sizes() != own.sizes()) continue;
     Tensor in = resample(nb.resampling, *image, g);
     if (nb.relit) in = in * relightFactor(in, own, nb.resampling.trust, weights.relightBox, g);
     moved.push_back(in);
-    used.push_back(&nb);
+    used.push_back(stillPixels > 0.0
+                       ? nb.weight * stillness(nb.resampling.positions, stillPixels, g)
+                       : nb.weight);
   }
   std::vector<Weighted> others;
-  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]->weight});
+  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]});
   return weightedMean(own, others).first;
 }
 

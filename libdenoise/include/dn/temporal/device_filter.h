@@ -3,8 +3,9 @@
 // the device while they are in the window. The same algorithm and options as
 // filterFrame: reprojection chained along the motion, the guides' tests with
 // their neighbourhood, Catmull-Rom with the bilinear fallback, the repeated
-// noise, light and colour tests, relighting, the learned trust, the weighted
-// mean, the accumulated render and the past frames' histories.
+// noise, light and colour tests, relighting, the learned trust, the light
+// that moves with the view, the weighted mean, the accumulated render and the
+// past frames' histories.
 //
 // It computes in float32 where filterFrame computes in double, and its sums
 // run in another order, so its results differ from filterFrame's in the last
@@ -34,6 +35,7 @@ struct DeviceFrame {
   torch::Tensor history;          // 3 channels, once made (WindowFrame::history)
   torch::Tensor albedo, normal, depth;
   torch::Tensor toPrevious, toNext;  // 2 channels each
+  torch::Tensor viewDependent;       // 1 channel (WindowFrame::viewDependent)
   bool hasMotion() const { return toPrevious.defined() && toNext.defined(); }
 };
 
@@ -90,9 +92,10 @@ struct DeviceTemporalResult {
 DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, std::size_t centre,
                                  const TemporalOptions& options = {});
 
-// filterWith on (channels, pixels) tensors of the window's frames.
+// filterWith on (channels, pixels) tensors of the window's frames (with
+// `stillPixels` as there).
 torch::Tensor filterWith(const DeviceFilterWeights& weights,
-                         const std::vector<const torch::Tensor*>& images);
+                         const std::vector<const torch::Tensor*>& images, double stillPixels = 0.0);
 
 // historyMean and blendWithHistory on the device.
 torch::Tensor historyMean(const torch::Tensor& own, const DeviceTemporalResult& result,
