@@ -1,12 +1,12 @@
 # Install rules: `cmake --install build --prefix /opt/dn` gives the tools, their
 # docs, the shipped models, the libraries with their headers, a CMake package
 # (find_package(DiffusionDenoise) -> dn::tonemap, dn::ocio, dn::metrics,
-# dn::buffers, dn::reproject, dn::io, dn::data, dn::motion, dn::infer, dn::denoise,
-# dn::temporal) and pkg-config files (dn-tonemap, dn-metrics, dn-io,
+# dn::buffers, dn::reproject, dn::io, dn::data, dn::motion, dn::infer,
+# dn::temporal_device, dn::denoise, dn::temporal) and pkg-config files (dn-tonemap, dn-metrics, dn-io,
 # dn-denoise, dn-temporal). Everything is relocatable: the
 # package files find the prefix from their own place. Built with
 # DN_WITH_OIIO=OFF: the libraries that build (dn::tonemap, dn::metrics,
-# dn::buffers, dn::reproject, dn::infer), the CMake package and the models, no tools and no
+# dn::buffers, dn::reproject, dn::infer, dn::temporal_device), the CMake package and the models, no tools and no
 # pkg-config files (theirs require OpenColorIO and OpenImageIO).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
@@ -20,7 +20,7 @@ if(DN_WITH_OIIO)
   list(APPEND dn_exports dn_tonemap_ocio ocio dn_io io dn_data data dn_motion motion)
 endif()
 if(DN_WITH_TORCH)
-  list(APPEND dn_exports dn_infer infer)
+  list(APPEND dn_exports dn_infer infer dn_temporal_device temporal_device)
 endif()
 if(TARGET dn_core)
   list(APPEND dn_exports dn_core denoise)

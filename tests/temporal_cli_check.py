@@ -7,7 +7,9 @@ and over how many frames the render was accumulated, a frame's result does
 not depend on how the shot was split into runs (bit-identical pixels), and a
 sequence without motion vectors is denoised frame by frame with one line
 saying so, as is a single frame of a sequence without its Vector pass (its
-neighbours' chains stop at it). Also dnmetrics on the sequences (per-frame rows, flicker).
+neighbours' chains stop at it). The filter as tensor operations
+(--temporal-filter tensors, on the CPU device) gives the CPU code's frames
+within 1e-4 of the peak. Also dnmetrics on the sequences (per-frame rows, flicker).
 
   temporal_cli_check.py --dndenoise BIN --dnmetrics BIN --testdata DIR --work-dir DIR
 """
@@ -84,10 +86,19 @@ def main():
     filtered = run(plain + ["-o", os.path.join(work, "filter.#.exr"), "--temporal", "filter", "-v"])
     run(plain + ["-o", os.path.join(work, "rules.#.exr"), "--temporal-trust", "rules"])
     run(plain + ["-o", os.path.join(work, "learned.#.exr"), "--temporal-trust", "learned"])
+    # The filter as tensor operations (on the CPU device here; --device cuda's default),
+    # against its per-pixel code, in float (half's rounding would hide or magnify the difference).
+    run(plain + ["-o", os.path.join(work, "cpu.#.exr"), "--temporal-filter", "cpu"])
+    for path in ("cpu", "tensors"):
+        for trust in ("rules", "learned"):
+            run(plain + ["-o", os.path.join(work, f"{path}_{trust}_float.#.exr"), "--float",
+                         "--temporal-filter", path, "--temporal-trust", trust])
     check(not any("accumulated over" in l for l in filtered.stderr.splitlines()),
           "--temporal filter: no render accumulated")
     frames = {name: [read_rgb(os.path.join(work, f"{name}.{n:04d}.exr")) for n in FRAMES]
-              for name in ("whole", "default", "on", "alone", "filter", "rules", "learned")}
+              for name in ("whole", "default", "on", "alone", "filter", "rules", "learned", "cpu",
+                           "cpu_rules_float", "cpu_learned_float", "tensors_rules_float",
+                           "tensors_learned_float")}
     check(all(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["filter"])),
           "the default denoises the accumulated renders too (not the same as --temporal filter)")
     check(all(np.array_equal(a, b) for a, b in zip(frames["default"], frames["on"])),
@@ -97,6 +108,15 @@ def main():
     check(any(not np.array_equal(a, b) for a, b in zip(frames["default"], frames["learned"])) and
           all(not np.array_equal(a, b) for a, b in zip(frames["learned"], frames["alone"])),
           "--temporal-trust learned: the model's network changes the weights, neighbours still used")
+    check(all(np.array_equal(a, b) for a, b in zip(frames["default"], frames["cpu"])),
+          "on the CPU the filter runs its per-pixel code by default (= --temporal-filter cpu)")
+    for trust in ("rules", "learned"):
+        worst = max(float(np.max(np.abs(a - b)) / max(1e-6, float(np.max(np.abs(b)))))
+                    for a, b in zip(frames[f"tensors_{trust}_float"], frames[f"cpu_{trust}_float"]))
+        print(f"--temporal-filter tensors against the CPU's code (--temporal-trust {trust}): "
+              f"max |difference| {worst:.2e} of the peak")
+        check(worst < 1e-4, f"--temporal-filter tensors gives the CPU code's frames within 1e-4 of the "
+              f"peak (--temporal-trust {trust})")
     no_trust = os.path.join(os.path.dirname(os.path.abspath(args.testdata)), "models", "oidn.dnm")
     result = run(plain + ["-o", os.path.join(work, "bad.#.exr"), "--temporal-trust", "learned",
                           "--model", no_trust], expect=1)

@@ -103,6 +103,9 @@ std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& j
   temporal::SequenceSettings settings = o.sequence;
   settings.read = o.read;
   settings.filter.threads = torch::get_num_threads();
+  // On CUDA the filter runs there too, the window's frames kept on the GPU.
+  if (o.temporalFilter == "tensors" || (o.temporalFilter == "auto" && o.device == "cuda"))
+    settings.filterDevice = torch::Device(o.device);
   const auto& notes = denoiser.info().notes;
   const auto trust = notes.find("temporal_trust");
   if (trust != notes.end() && o.temporalTrust == "learned")

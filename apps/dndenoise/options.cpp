@@ -100,6 +100,12 @@ output:
                       carries (learned: less lost where a moving surface's
                       reflections or a sweeping shadow do not follow the
                       motion, less gained where all stands still)
+  --temporal-filter auto|cpu|tensors
+                      where --temporal's filter runs: the CPU's per-pixel code
+                      (cpu), or tensor operations on --device with the window's
+                      frames kept there (tensors: float32, within about 1e-6 of
+                      cpu's); auto (the default): tensors with --device cuda,
+                      else cpu
   --motion PATTERN    motion vectors from separate files (e.g. mv.#.exr: Blender's
                       4 channels, or 2 channels of forward motion in pixels)
   --layer NAME        result layer name (default: Denoised, in the input's view layer)
@@ -305,6 +311,11 @@ Options parseArgs(int argc, char** argv) {
       o.temporal = v != "off";
       o.sequence.filter.accumulatedShare =
           v == "filter" ? 0.0 : temporal::TemporalOptions().accumulatedShare;
+    } else if (args.flag("--temporal-filter")) {
+      o.temporalFilter = args.value("--temporal-filter");
+      if (o.temporalFilter != "auto" && o.temporalFilter != "cpu" && o.temporalFilter != "tensors")
+        throw cli::UsageError("--temporal-filter must be auto, cpu or tensors, got " +
+                              o.temporalFilter);
     } else if (args.flag("--temporal-trust")) {
       o.temporalTrust = args.value("--temporal-trust");
       if (o.temporalTrust != "learned" && o.temporalTrust != "rules")

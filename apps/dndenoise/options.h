@@ -49,6 +49,7 @@ struct Options {
   bool temporal = true;                     // --temporal on|filter; off: false
   dn::temporal::SequenceSettings sequence;  // --window, --motion, --temporal filter
   std::string temporalTrust = "rules";      // --temporal-trust learned|rules
+  std::string temporalFilter = "auto";      // --temporal-filter auto|cpu|tensors
 };
 
 // The options of the command line; -h, --version and --list-views print and exit.

@@ -11,7 +11,9 @@
 # 1. uses the binaries in carry/build (built on the development machine against
 #    the same wheel) or configures the inference core alone (DN_WITH_OIIO=OFF)
 #    and builds it;
-# 2. runs test_device (CUDA against the CPU, float and half), test_npy, test_tiler;
+# 2. runs test_device (CUDA against the CPU, float and half), test_npy, test_tiler,
+#    test_temporal_device (the temporal filter's tensor path against its CPU path,
+#    on the CPU device and on CUDA);
 # 3. tiles the shipped example to each size (bench/gpu/make_inputs.py);
 # 4. at the first size: every mode on the CPU once (the reference), then on
 #    the device in float with TF32 off (the agreement, >= 60 dB or the check
@@ -21,7 +23,10 @@
 # 5. at the other sizes: the modes in float and half with the budget from the
 #    GPU's free memory (one tile), and the prefilter mode in the old 3 GB tiles;
 # 6. the temporal default per frame against frame by frame at the first size
-#    (bench/temporal_npy_bench, a synthetic shot);
+#    (bench/temporal_npy_bench, a synthetic shot): on CUDA the filter as tensor
+#    operations there, in float and half; on the CPU its per-pixel code and the
+#    tensor path; the tensor path's result against the per-pixel code's
+#    (>= 100 dB or the check fails);
 # 7. with --oidn (or when carry/oidn came along): OIDN 2.5.1's CUDA device at
 #    every size (bench/gpu/oidn_bench.py);
 # 8. writes $OUT/results/DATE-GPU.txt: the RESULT lines of every run (today's
@@ -105,6 +110,9 @@ finish() {
   awk '/precision=float/ && /tf32=off/ { for (i = 1; i <= NF; ++i) if ($i ~ /^psnr_vs_cpu=/) {
          split($i, kv, "="); if (kv[2] != "inf" && kv[2] + 0 < 60) { print "check_cuda: below 60 dB: " $0; bad = 1 } } }
        END { exit bad }' "$results" || fail "agreement below 60 dB"
+  awk '/mode=temporal/ { for (i = 1; i <= NF; ++i) if ($i ~ /^filter_psnr_db=/) {
+         split($i, kv, "="); if (kv[2] + 0 < 100) { print "check_cuda: temporal filter below 100 dB: " $0; bad = 1 } } }
+       END { exit bad }' "$results" || fail "temporal filter's agreement below 100 dB"
   if [ ${#failures[@]} -gt 0 ]; then
     printf 'check_cuda: %d step(s) failed: %s\n' ${#failures[@]} "${failures[*]}"
     exit 1
@@ -156,7 +164,7 @@ else
     cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DDN_WITH_OIIO=OFF -DDN_BUILD_TESTS=$tests \
       -DCMAKE_PREFIX_PATH="$prefixes" >"$out/build.log" 2>&1 || { tail -40 "$out/build.log"; exit 1; }
     targets=(denoise_npy_bench temporal_npy_bench)
-    [ "$tests" = ON ] && targets+=(test_device test_npy test_tiler)
+    [ "$tests" = ON ] && targets+=(test_device test_npy test_tiler test_temporal_device)
     cmake --build "$build" -j"$jobs" --target "${targets[@]}" >>"$out/build.log" 2>&1 ||
       { grep -E "error|undefined" "$out/build.log" | head -30; exit 1; }
     echo "built ${targets[*]} in $(($(date +%s) - start)) s with $jobs jobs"
@@ -166,11 +174,11 @@ fi
 
 if [ "$tests" = ON ]; then
   step "tests: device placement, half, the GPU path's pieces (on $device too), .npy, tiles"
-  for t in test_device test_npy test_tiler; do
+  for t in test_device test_npy test_tiler test_temporal_device; do
     [ -x "$build/bin/$t" ] || continue
     "$build/bin/$t" >>"$out/tests.log" 2>&1 || fail "$t (see tests.log)"
   done
-  grep -E "dB|Status|test cases" "$out/tests.log" | head -20
+  grep -E "dB|Status|test cases" "$out/tests.log" | head -60
 fi
 
 inputs
@@ -240,12 +248,19 @@ for size in ${sizes//,/ }; do
     --max-memory 3 || fail "$device $size 3 GB tiles"
 done
 step "$device at $first: the temporal default per frame against frame by frame (radius,frames $temporal)"
-for precision in float $([ "$device" = cuda ] && echo fp16); do
+temporal_bench() {  # PRECISION FILTER (cpu: the per-pixel code; device: tensors on $device)
   "$build/bin/temporal_npy_bench" --model models/default.dnm --input "$in1" --device "$device" \
-    --precision "$precision" --radius "${temporal%,*}" --frames "${temporal#*,}" 2>&1 |
+    --precision "$1" --filter "$2" --radius "${temporal%,*}" --frames "${temporal#*,}" 2>&1 |
     tee "$work/temporal.log"
-  [ "${PIPESTATUS[0]}" = 0 ] || fail "temporal $precision"
+  [ "${PIPESTATUS[0]}" = 0 ] || fail "temporal $1 $2"
   record "$work/temporal.log"
-done
+}
+if [ "$device" = cuda ]; then
+  temporal_bench float device
+  temporal_bench fp16 device
+else  # both paths on the CPU: their times, and the tensors' agreement with the loops
+  temporal_bench float cpu
+  temporal_bench float device
+fi
 [ "$device" = cuda ] && oidn
 finish

@@ -8,8 +8,9 @@
 #   oidn/        with --with-oidn: OIDN 2.5.1's core and CUDA device from the
 #                pyoidn wheel, for OIDN's own CUDA timings (about 54 MB)
 #   build/       with --cuda-build DIR: denoise_npy_bench, temporal_npy_bench,
-#                test_device, test_npy and test_tiler from a core build against
-#                the GPU machine's PyTorch wheel (docs/dndenoise.md#gpu),
+#                test_device, test_npy, test_tiler and test_temporal_device
+#                from a core build against the GPU machine's PyTorch wheel
+#                (docs/dndenoise.md#gpu),
 #                stripped, so that the GPU run skips its build
 #
 #   bash bench/gpu/prepare_carry.sh [--with-oidn] [--cuda-build DIR] [BUILD_DIR]
@@ -66,7 +67,7 @@ fi
 
 if [ -n "$cuda_build" ]; then
   mkdir -p "$carry/build/bin"
-  for program in denoise_npy_bench temporal_npy_bench test_device test_npy test_tiler; do
+  for program in denoise_npy_bench temporal_npy_bench test_device test_npy test_tiler test_temporal_device; do
     strip -o "$carry/build/bin/$program" "$cuda_build/bin/$program"
   done
   sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$cuda_build/CMakeCache.txt" >"$carry/build/source_dir"

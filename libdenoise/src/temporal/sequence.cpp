@@ -21,6 +21,7 @@ struct Sequence::Input {
   Image cleanAlbedo;     // the prefilter's, for denoising the frame's history
   Image cleanNormal;
   std::optional<Companions> companions;  // once made
+  std::optional<DeviceFrame> onDevice;   // SequenceSettings::filterDevice: the frame there
 };
 
 namespace {
@@ -151,15 +152,38 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
   if (!out.alone) return out;
   const Image& own = input(number, nullptr, read)->frame.denoised;
   std::vector<const WindowFrame*> window;
+  std::vector<const DeviceFrame*> deviceWindow;
   for (int m = number - radius; m <= number + radius; ++m) {
     auto source = estimate(m, nullptr, read, denoise) ? input(m, nullptr, read) : nullptr;
     const bool usable = source && source->frame.denoised.sameShape(own);
     window.push_back(usable ? &source->frame : nullptr);
+    if (settings_.filterDevice) deviceWindow.push_back(usable ? &onDevice(*source) : nullptr);
   }
   TemporalOptions options = settings_.filter;
   options.radius = radius;
-  out.result = filterFrame(window, radius, options);
+  if (!settings_.filterDevice) {
+    out.result = filterFrame(window, radius, options);
+    return out;
+  }
+  out.device = filterFrame(deviceWindow, radius, options);
+  out.result.stats = out.device->stats;
+  if (out.device->history.defined())  // the network's input
+    out.result.history = pixelsToImage(out.device->history, own.width, own.height);
   return out;
+}
+
+const DeviceFrame& Sequence::onDevice(Input& input) const {
+  if (!input.onDevice) input.onDevice = toDevice(input.frame, *settings_.filterDevice);
+  return *input.onDevice;
+}
+
+Image Sequence::blendOnDevice(int number, const DeviceTemporalResult& filtered,
+                              double share) const {
+  const DeviceFrame& self = *inputs_.at(number)->onDevice;
+  torch::Tensor color = filtered.color;
+  if (share > 0.0)
+    color = blendWithHistory(color, historyMean(self.history, filtered, settings_.filter), share);
+  return pixelsToImage(color, self.width, self.height);
 }
 
 Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalResult& filtered,
@@ -172,6 +196,10 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalR
                                                 self.cleanAlbedo, self.cleanNormal))
                 .color
           : self.frame.denoised;
+  if (self.onDevice)
+    self.onDevice->history = filtered.stats.accumulatedFrames > 1.0
+                                 ? pixelsToDevice(self.frame.history, *settings_.filterDevice)
+                                 : self.onDevice->denoised;
   return self.frame.history;
 }
 
@@ -247,9 +275,17 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   WithCompanions out{*self.alone, {}};
   // The passes first, so that the neighbours' taps and weights are gone
   // before the history's network run (about 21 bytes a pixel a neighbour).
-  if (make) out.companions = filteredCompanions(n, frame, self.result.weights, read, make);
+  if (make)
+    out.companions = filteredCompanions(
+        n, frame, self.device ? self.device->weights.toHost() : self.result.weights, read, make);
   self.result.weights = FilterWeights();
   DenoiseResult& result = out.result;
+  if (self.device) {
+    self.device->weights = DeviceFilterWeights();
+    if (share > 0.0) denoisedHistory(n, frame, self.result, denoise);
+    result.color = blendOnDevice(n, *self.device, share);
+    return out;
+  }
   result.color = std::move(self.result.color);
   if (share > 0.0) {
     const Image own = denoisedHistory(n, frame, self.result, denoise);

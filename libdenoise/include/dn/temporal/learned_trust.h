@@ -44,6 +44,10 @@ class LearnedTrust {
   bool empty() const { return sizes_.empty(); }
   // The weight of one pixel of one neighbour from its kTrustFeatureCount features.
   float weigh(const float* features) const;
+  // The layers' widths and parameters as the constructor takes them (for
+  // weighing every pixel at once on a device: dn/temporal/device_filter.h).
+  const std::vector<int>& sizes() const { return sizes_; }
+  const std::vector<float>& params() const { return params_; }
 
  private:
   std::vector<int> sizes_;

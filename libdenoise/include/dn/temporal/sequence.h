@@ -15,11 +15,13 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "dn/infer/denoiser.h"
 #include "dn/io/buffer_io.h"
+#include "dn/temporal/device_filter.h"
 #include "dn/temporal/temporal_filter.h"
 
 namespace dn::temporal {
@@ -32,6 +34,11 @@ struct SequenceSettings {
   // Where set, a frame's WindowFrame::viewDependent, from its file and its
   // buffers as Read gives them (empty where the file cannot tell).
   std::function<Image(const std::string& path, const FrameBuffers& frame)> viewDependentShare;
+  // Unset: the filter runs on the CPU (temporal_filter.h; its output does not
+  // change). Set: as tensor operations on this device (device_filter.h), each
+  // frame copied there once and kept while in the window, the colour copied
+  // back once filtered and blended. dndenoise sets it with --device cuda.
+  std::optional<torch::Device> filterDevice;
 };
 
 // An image made per frame beside its colour (a renderer's light pass,
@@ -103,7 +110,10 @@ class Sequence {
   // the frame's file is missing).
   struct Filtered {
     std::shared_ptr<const DenoiseResult> alone;
+    // On the device: only the stats and the accumulated render (for the
+    // network) are on the host; the rest is in `device`.
     TemporalResult result;
+    std::optional<DeviceTemporalResult> device;
   };
   Filtered filtered(int number, const FrameBuffers* given, const Read& read,
                     const Denoise& denoise);
@@ -119,6 +129,11 @@ class Sequence {
   std::map<std::string, Image> filteredCompanions(int number, const FrameBuffers& frame,
                                                   const FilterWeights& weights, const Read& read,
                                                   const MakeCompanions& make);
+  // The frame on settings_.filterDevice, copied there on first use.
+  const DeviceFrame& onDevice(Input& input) const;
+  // The filtered colour blended with the accumulated render denoised (and
+  // averaged with the past frames'), on the device; the result copied back.
+  Image blendOnDevice(int number, const DeviceTemporalResult& filtered, double share) const;
   std::string fileOf(int number) const;
   void forget(int number);
 
