@@ -338,6 +338,16 @@ std::vector<temporal::WindowFrame> stillShot(const Synthetic& truth, unsigned co
   return frames;
 }
 
+// Three frames of a pan, a pixel a frame, their seeds counting up from the two given.
+std::vector<temporal::WindowFrame> panShot(unsigned noiseSeed, unsigned leftoverSeed) {
+  std::vector<temporal::WindowFrame> frames;
+  for (int t = 0; t < 3; ++t) {
+    frames.push_back(stillFrame(makeFrame(32, 24, t, 0), noiseSeed + t, leftoverSeed + t));
+    frames.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+  }
+  return frames;
+}
+
 // The window over every frame given.
 std::vector<const temporal::WindowFrame*> windowOf(
     const std::vector<temporal::WindowFrame>& frames) {
@@ -701,11 +711,7 @@ double flicker(const std::vector<Image>& frames) {
 TEST_CASE(
     "temporal filter: its weights filter another image of the frames as they did the results") {
   // A pan (resampled taps, the screen's edge), a still shot, and neighbours relit first.
-  std::vector<temporal::WindowFrame> pan;
-  for (int t = 0; t < 3; ++t) {
-    pan.push_back(stillFrame(makeFrame(32, 24, t, 0), 40 + t, 50 + t));
-    pan.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
-  }
+  std::vector<temporal::WindowFrame> pan = panShot(40, 50);
   const Synthetic truth = makeFrame(32, 24, 0, 0);
   std::vector<temporal::WindowFrame> relit = stillShot(truth, 3, 500, 600);
   for (unsigned t : {0u, 2u}) {
@@ -777,11 +783,7 @@ TEST_CASE("a view-dependent pass takes a neighbour only where the surface stood 
   CHECK(temporal::filterWith(stillWeights, images, 0.5).pixels ==
         temporal::filterWith(stillWeights, images).pixels);
   // A pan of a pixel a frame: the frame's own pass, bit for bit.
-  std::vector<temporal::WindowFrame> pan;
-  for (int t = 0; t < 3; ++t) {
-    pan.push_back(stillFrame(makeFrame(32, 24, t, 0), 40 + t, 50 + t));
-    pan.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
-  }
+  std::vector<temporal::WindowFrame> pan = panShot(40, 50);
   const temporal::FilterWeights panWeights = temporal::filterFrame(windowOf(pan), 1).weights;
   REQUIRE(panWeights.neighbours.size() == 2);
   CHECK(temporal::filterWith(panWeights, images, 0.5).pixels == pass[1].pixels);
@@ -789,11 +791,7 @@ TEST_CASE("a view-dependent pass takes a neighbour only where the surface stood 
 
 TEST_CASE(
     "temporal filter: light that moves with the view is taken only where surfaces stood still") {
-  std::vector<temporal::WindowFrame> pan;
-  for (int t = 0; t < 3; ++t) {
-    pan.push_back(stillFrame(makeFrame(32, 24, t, 0), 60 + t, 70 + t));
-    pan.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
-  }
+  std::vector<temporal::WindowFrame> pan = panShot(60, 70);
   const Synthetic truth = makeFrame(32, 24, 0, 0);
   std::vector<temporal::WindowFrame> still = stillShot(truth, 3, 1300, 1400);
   for (auto* frames : {&pan, &still}) {
