@@ -28,7 +28,7 @@ class DN_OT_prepare(bpy.types.Operator):
     def execute(self, context):
         scene = context.scene
         try:
-            changes, warnings = prep.prepare(scene, scene.dn_denoise.passes)
+            changes, warnings = prep.prepare(scene, scene.dn_denoise.passes, scene.dn_denoise.temporal)
         except ValueError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -49,7 +49,8 @@ class DN_OT_check(bpy.types.Operator):
     bl_label = "Check for dndenoise"
 
     def execute(self, context):
-        problems = prep.check(context.scene, context.scene.dn_denoise.passes)
+        settings = context.scene.dn_denoise
+        problems = prep.check(context.scene, settings.passes, settings.temporal)
         for line in problems:
             self.report({"WARNING"}, line)
         _status(context, "; ".join(problems) if problems else "ready for dndenoise")

@@ -7,13 +7,17 @@ renders, since a multilayer EXR holds them all."""
 LIGHT_PASSES = [f"use_pass_{kind}_{part}" for kind in ("diffuse", "glossy", "transmission")
                 for part in ("direct", "indirect", "color")] + ["use_pass_emit", "use_pass_environment"]
 CYCLES_LIGHT_PASSES = ["use_pass_volume_direct", "use_pass_volume_indirect"]
+# Reflected and refracted light: the temporal filter takes it from a neighbour
+# only where the surface stood still, and tells it by these passes.
+VIEW_DEPENDENT_PASSES = [f"use_pass_{kind}_{part}" for kind in ("glossy", "transmission")
+                         for part in ("direct", "indirect", "color")]
 
 
 def _label(prop):
     return prop[len("use_pass_"):].replace("_", " ").title() + " pass"
 
 
-def _settings(scene, light_passes):
+def _settings(scene, light_passes, temporal):
     """(owner, property, wanted value, label, why) for everything dndenoise wants."""
     wanted = [
         (scene.render, "use_motion_blur", False, "Motion blur",
@@ -34,6 +38,10 @@ def _settings(scene, light_passes):
             wanted += [(owner, p, True, prefix + _label(p), "light passes for --passes")
                        for owner, props in ((layer, LIGHT_PASSES), (layer.cycles, CYCLES_LIGHT_PASSES))
                        for p in props]
+        elif temporal:
+            wanted += [(layer, p, True, prefix + _label(p),
+                        "reflections move with the view: the temporal filter tells them from the surface")
+                       for p in VIEW_DEPENDENT_PASSES]
     return wanted
 
 
@@ -42,12 +50,12 @@ def _multilayer(scene):
     return settings.file_format == "OPEN_EXR_MULTILAYER"
 
 
-def check(scene, light_passes=False):
+def check(scene, light_passes=False, temporal=False):
     """One line per thing the scene lacks for dndenoise; empty when it is ready."""
     if scene.render.engine != "CYCLES":
         return [f"the scene renders with {scene.render.engine}; the denoiser's passes are Cycles'"]
     problems = [f"{label} is {'on' if not value else 'off'} ({why})"
-                for owner, prop, value, label, why in _settings(scene, light_passes)
+                for owner, prop, value, label, why in _settings(scene, light_passes, temporal)
                 if getattr(owner, prop) != value]
     if not _multilayer(scene):
         problems.append(f"output format is {scene.render.image_settings.file_format}, "
@@ -55,13 +63,13 @@ def check(scene, light_passes=False):
     return problems
 
 
-def prepare(scene, light_passes=False):
+def prepare(scene, light_passes=False, temporal=False):
     """Sets what dndenoise needs. Returns (changes, warnings), one line each."""
     if scene.render.engine != "CYCLES":
         raise ValueError(f"the scene renders with {scene.render.engine}: switch to Cycles first "
                          "(Denoising Data is a Cycles pass); nothing changed")
     changes, warnings = [], []
-    for owner, prop, value, label, why in _settings(scene, light_passes):
+    for owner, prop, value, label, why in _settings(scene, light_passes, temporal):
         if getattr(owner, prop) == value:
             continue
         setattr(owner, prop, value)

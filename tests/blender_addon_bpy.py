@@ -87,6 +87,8 @@ def main():
     seen["properties"] = {
         "view_layer.use_pass_vector": layer.use_pass_vector,
         "view_layer.cycles.denoising_store_passes": layer.cycles.denoising_store_passes,
+        "view_layer.use_pass_glossy_direct": layer.use_pass_glossy_direct,
+        "view_layer.use_pass_transmission_color": layer.use_pass_transmission_color,
         "scene.cycles.use_animated_seed": scene.cycles.use_animated_seed,
         "scene.cycles.use_denoising": scene.cycles.use_denoising,
         "scene.render.use_motion_blur": scene.render.use_motion_blur,

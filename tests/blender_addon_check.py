@@ -148,10 +148,12 @@ def main():
     check("Prepare reports what it changed", seen["prepare"][0] == ["FINISHED"] and
           seen["prepare_status"].startswith("prepared: "), seen["prepare_status"])
     expected = {"view_layer.use_pass_vector": True, "view_layer.cycles.denoising_store_passes": True,
+                "view_layer.use_pass_glossy_direct": True, "view_layer.use_pass_transmission_color": True,
                 "scene.cycles.use_animated_seed": True, "scene.cycles.use_denoising": False,
                 "scene.render.use_motion_blur": False, "image_settings.media_type": "MULTI_LAYER_IMAGE",
                 "image_settings.file_format": "OPEN_EXR_MULTILAYER"}
-    check("Prepare set the passes, seed, motion blur and multilayer EXR", seen["properties"] == expected,
+    check("Prepare set the passes (glossy and transmission for Temporal), seed, motion blur and multilayer EXR",
+          seen["properties"] == expected,
           seen["properties"])
     check("Check after Prepare: ready", seen["check_after"] == "ready for dndenoise", seen["check_after"])
     check("Prepare again changes nothing", seen["prepare_again"] == "already prepared: nothing changed",
@@ -191,8 +193,8 @@ def main():
           seen["novec_denoise"] == [["FINISHED"], ""] and "frame by frame" in seen["novec_status"],
           seen["novec_status"])
 
-    check("Light Passes: Prepare adds 13 passes and the Vector pass back",
-          seen["passes_prepare"] == "prepared: 14 settings changed", seen["passes_prepare"])
+    check("Light Passes: Prepare adds the 7 light passes Temporal's 6 lacked and the Vector pass back",
+          seen["passes_prepare"] == "prepared: 8 settings changed", seen["passes_prepare"])
     passes_den = os.path.join(work, "passes_den", "shot.0002.exr")
     with OpenEXR.File(passes_den) as f:
         layers = {p.name() for p in f.parts}
