@@ -145,7 +145,7 @@ def main():
         pkg_build("noise.cpp", ["dn-denoise"], os.path.join(work, "noise-pc"), [f'-DDN_MODEL_DIR="{model_dir}"'])
         out = must([os.path.join(work, "noise-pc"), render, ref], "pkg-config noise runs")
         check("pkg-config noise prints the same numbers", values(out.stdout) == noise, out.stdout)
-        pkg_build("sequence.cpp", ["dn-temporal"], os.path.join(work, "sequence-pc"),
+        pkg_build("sequence.cpp", ["dn-temporal", "dn-denoise"], os.path.join(work, "sequence-pc"),
                   [f'-DDN_MODEL_DIR="{model_dir}"'])
         out = must([os.path.join(work, "sequence-pc"), shot(args), "1-3",
                     os.path.join(work, "seq-pc.#.exr")], "pkg-config sequence runs", ONE_THREAD)
