@@ -32,7 +32,8 @@ struct SequenceSettings {
   ReadOptions read;        // the view layer and channel overrides
   TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
   // Where set, a frame's WindowFrame::viewDependent, from its file and its
-  // buffers as Read gives them (empty where the file cannot tell).
+  // buffers as Read gives them (empty where the file cannot tell); dndenoise
+  // sets dn::viewDependentShare (dn/passes/sequence_passes.h).
   std::function<Image(const std::string& path, const FrameBuffers& frame)> viewDependentShare;
   // Unset: the filter runs on the CPU (temporal_filter.h; its output does not
   // change). Set: as tensor operations on this device (device_filter.h), each
