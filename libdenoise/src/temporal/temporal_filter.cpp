@@ -696,8 +696,12 @@ Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& 
   if (weights.centre >= images.size() || !images[weights.centre])
     throw std::invalid_argument("filterWith: the centre frame's image is missing");
   const Image& own = *images[weights.centre];
+  // Reserved, so that `others` may point into them as they grow.
   std::vector<Image> moved;
-  std::vector<std::vector<double>> used;
+  std::vector<std::vector<double>> gated;  // weights stillPixels took some of
+  moved.reserve(weights.neighbours.size());
+  gated.reserve(weights.neighbours.size());
+  std::vector<Weighted> others;
   for (const NeighbourWeights& nb : weights.neighbours) {
     const Image* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
     if (!image || !image->sameShape(own)) continue;
@@ -705,14 +709,15 @@ Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& 
     if (nb.relit)
       in = scaled(std::move(in), relightFactor(in, own, nb.resampling.trust, weights.relightBox));
     moved.push_back(std::move(in));
-    used.push_back(nb.weight);
+    const std::vector<double>* weight = &nb.weight;
     if (stillPixels > 0.0) {
+      gated.push_back(nb.weight);
       const Image still = stillness(nb.resampling.positions, stillPixels);
-      for (std::size_t i = 0; i < used.back().size(); ++i) used.back()[i] *= still.pixels[i];
+      for (std::size_t i = 0; i < gated.back().size(); ++i) gated.back()[i] *= still.pixels[i];
+      weight = &gated.back();
     }
+    others.push_back({&moved.back(), weight});
   }
-  std::vector<Weighted> others;
-  for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]});
   return toImage(weightedMean(own, others).value, own);
 }
 
