@@ -245,6 +245,12 @@ TEST_CASE("device filter: relit neighbours and a change of light agree") {
   const Both relit = filterBoth(windowOf(frames), 1);
   CHECK(relit.cpu.stats.relit == 2);
   checkSameFilter("relit", relit);
+  // Relit for the renders' light test over the frame alone, not the spread.
+  TemporalOptions byLightTest;
+  byLightTest.changedLightSpread = 1e9;
+  const Both relitByLightTest = filterBoth(windowOf(frames), 1, byLightTest);
+  CHECK(relitByLightTest.cpu.stats.relit == 2);
+  checkSameFilter("relit by the light test", relitByLightTest);
 
   // Light changing from pixel to pixel: left out whole, the frame's own exactly.
   std::mt19937 random(42);

@@ -509,6 +509,14 @@ Tensor lightChange(const Tensor& current, const Tensor& moved, const Tensor& tru
   return onlyWhere(defined, (d / safeN).abs() / (torch::sqrt(safeV) / safeN)).to(torch::kFloat);
 }
 
+// The mean of `values` over the pixels where `trust` > 0 (0 where none is).
+double trustedMean(const Tensor& values, const Tensor& trust) {
+  const Tensor mask = trust > 0;
+  const double count = mask.sum().item<double>();
+  return count > 0 ? values.masked_select(mask).to(torch::kDouble).sum().item<double>() / count
+                   : 0.0;
+}
+
 struct Contribution {
   enum class Verdict { Used, Relit, RepeatedNoise, ChangedLight } verdict = Verdict::Used;
   Tensor image, history, historyWeight;
@@ -546,10 +554,13 @@ Contribution contributionOf(const Centre& centre, const DeviceFrame& neighbour,
     return out;
   }
   out.image = moved;
+  Tensor light = lightChange(centre.noisyMapped, reprojectNearest(neighbourNoisy, positions, g),
+                             trust, centre.residual, residual, options.lightBox, g);
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
   // A change of light over most of the frame: relit first, left out whole
   // if that does not bring the spread down (temporal_filter.cpp).
-  if (fullSpread > options.changedLightSpread) {
+  if (fullSpread > options.changedLightSpread ||
+      trustedMean(light, trust) > options.changedLightMean) {
     out.relight = relightFactor(out.image, centre.frame->denoised, trust, options.relightBox, g);
     out.image = out.image * out.relight;
     if (out.history.defined()) out.history = out.history * out.relight;
@@ -568,8 +579,7 @@ Contribution contributionOf(const Centre& centre, const DeviceFrame& neighbour,
     out.resampling = std::move(plan);
     return out;
   }
-  out.lightChange = lightChange(centre.noisyMapped, reprojectNearest(neighbourNoisy, positions, g),
-                                trust, centre.residual, residual, options.lightBox, g);
+  out.lightChange = std::move(light);
   out.weight =
       trust * ((options.lightHigh - out.lightChange) / (options.lightHigh - options.lightLow))
                   .clamp(0.0, 1.0);

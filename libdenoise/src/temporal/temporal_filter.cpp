@@ -168,6 +168,15 @@ std::vector<float> lightChange(const Image& current, const Image& moved, const I
   return z;
 }
 
+// The mean of `values` over the pixels where `trust` > 0 (0 where none is).
+double trustedMean(const std::vector<float>& values, const Image& trust) {
+  double sum = 0.0;
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < values.size(); ++i)
+    if (trust.pixels[i] > 0.0f) sum += values[i], ++count;
+  return count ? sum / count : 0.0;
+}
+
 // Per pixel and channel, the mean of `image` over the (2r+1)^2 box of pixels
 // where `trust` > 0; -1 where the box holds none.
 Image trustedBoxMean(const Image& image, const Image& trust, int r) {
@@ -325,13 +334,18 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     return out;
   }
   out.image = std::move(moved);
+  std::vector<float> light =
+      lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
+                  centre.residual, residual, options.lightBox);
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
-  // Where the light changed over most of the frame (a moving lamp), the
-  // differences' own spread is large too, and shading changes too faint for
-  // the per-pixel tests are everywhere. Such a neighbour is brought to the
-  // frame's light first, and left out whole if that does not bring its
-  // spread down. Below that, the cap keeps moving shadows rejected.
-  if (fullSpread > options.changedLightSpread) {
+  // Where the light changed over most of the frame (a moving lamp, the sun),
+  // shading changes too faint for the per-pixel tests are everywhere: the
+  // differences' spread is large, or the renders' light test is high on
+  // average. Such a neighbour is brought to the frame's light first, and left
+  // out whole if that does not bring its spread down. Below that, the cap
+  // keeps moving shadows rejected.
+  if (fullSpread > options.changedLightSpread ||
+      trustedMean(light, trust) > options.changedLightMean) {
     out.relight = relightFactor(out.image, current.denoised, trust, options.relightBox);
     out.image = scaled(std::move(out.image), out.relight);
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
@@ -351,9 +365,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     out.resampling = std::move(plan);
     return out;
   }
-  out.lightChange =
-      lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
-                  centre.residual, residual, options.lightBox);
+  out.lightChange = std::move(light);
   for (std::size_t i = 0; i < out.weight.size(); ++i)
     out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - out.lightChange[i]) /
                                                      (options.lightHigh - options.lightLow),

@@ -76,6 +76,13 @@ struct TemporalOptions {
   // the box; the renders' light test is then skipped. Still above it, the
   // neighbour is left out whole.
   double changedLightSpread = 0.6;
+  // The sun moving sweeps shadows over much of the frame by a few pixels a
+  // frame: per pixel too faint for the light test, yet the neighbour is
+  // relit, not filtered, once its renders' light test (below) averages more
+  // than this many standard errors over the frame. Where only noise differs
+  // the mean is 1.2-1.3 (on every shot of experiments/shots/SPLIT_1080.md);
+  // on the sweeping sun's tuning shot, 2.5-12. Any of 1.4-3 chose alike there.
+  double changedLightMean = 2.0;
   int relightBox = 1;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
