@@ -343,7 +343,7 @@ std::vector<temporal::WindowFrame> panShot(unsigned noiseSeed, unsigned leftover
   std::vector<temporal::WindowFrame> frames;
   for (int t = 0; t < 3; ++t) {
     frames.push_back(stillFrame(makeFrame(32, 24, t, 0), noiseSeed + t, leftoverSeed + t));
-    frames.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+    frames.back().motion = constantMotion(32, 24, 1, 0, -1, 0);
   }
   return frames;
 }
@@ -469,7 +469,7 @@ TEST_CASE("temporal filter: a past history counts only where the surface stood s
   for (int t = 0; t < 3; ++t) {
     const Synthetic truth = makeFrame(32, 24, t, 0);
     frames.push_back(stillFrame(truth, 40 + t, 50 + t));
-    frames.back().motion = constantMotion(32, 24, -1, 0, 1, 0);
+    frames.back().motion = constantMotion(32, 24, 1, 0, -1, 0);
     frames.back().history = frames.back().denoised;
   }
   const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
