@@ -64,7 +64,7 @@ struct DeviceNeighbourWeights {
 // CPU's filterWith (a light pass denoised on the host).
 struct DeviceFilterWeights {
   std::size_t centre = 0;
-  int relightBox = 2;
+  int relightBox = 1;
   int width = 0, height = 0;
   std::vector<DeviceNeighbourWeights> neighbours;
   bool empty() const { return neighbours.empty(); }

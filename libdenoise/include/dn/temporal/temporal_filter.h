@@ -83,11 +83,10 @@ struct TemporalOptions {
   // the mean is 1.2-1.3 (on every shot of experiments/shots/SPLIT_1080.md);
   // on the sweeping sun's tuning shot, 2.5-12. Any of 1.4-3 chose alike there.
   double changedLightMean = 2.0;
-  // 5x5: at 1080p pixel scale a relit neighbour then averages the leftover
-  // errors' blotches 3x3 is too small for (the tuning half of SPLIT_1080.md,
-  // the filter alone: +0.13 / +0.07 dB over 3x3 at 4 / 16 spp; 7x7 loses at
-  // 16 spp, where the light's own detail matters more).
-  int relightBox = 2;
+  // 3x3. At 1080p pixel scale 5x5 let relit neighbours average wider blotches
+  // and gained on the dimmer of SPLIT_1080.md's tuning half, but haloed a
+  // spotlight's edge as it swept a room (held out: a frame 6.6 dB worse).
+  int relightBox = 1;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
   // lightLow standard errors to 0 at lightHigh (a change of light).
@@ -161,7 +160,7 @@ struct NeighbourWeights {
 
 struct FilterWeights {
   std::size_t centre = 0;
-  int relightBox = 2;
+  int relightBox = 1;
   std::vector<NeighbourWeights> neighbours;  // those it used, in the order of its sums
   bool empty() const { return neighbours.empty(); }
 };
