@@ -83,9 +83,10 @@ struct TemporalOptions {
   // the mean is 1.2-1.3 (on every shot of experiments/shots/SPLIT_1080.md);
   // on the sweeping sun's tuning shot, 2.5-12. Any of 1.4-3 chose alike there.
   double changedLightMean = 2.0;
-  // 3x3. At 1080p pixel scale 5x5 let relit neighbours average wider blotches
-  // and gained on the dimmer of SPLIT_1080.md's tuning half, but haloed a
-  // spotlight's edge as it swept a room (held out: a frame 6.6 dB worse).
+  // Relighting's box, 3x3. At 1080p pixel scale 5x5 let relit neighbours
+  // average wider blotches and gained on the dimmer of SPLIT_1080.md's tuning
+  // half, but haloed a spotlight's edge as it swept a room (held out: a frame
+  // 6.6 dB worse).
   int relightBox = 1;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
