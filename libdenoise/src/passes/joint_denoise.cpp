@@ -161,30 +161,28 @@ void closeResidual(const LightPassLayout& layout, LightPassImages& passes, const
     residual.pixels[i] = beauty.pixels[i] - explained.pixels[i];
 }
 
+// Means over the 2r+1 pixels along rows (`alongRows`) or columns, clipped.
+Image lineMean(const Image& image, int r, bool alongRows) {
+  Image out(image.width, image.height, image.channels);
+  const int length = alongRows ? image.width : image.height;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x) {
+      const int at = alongRows ? x : y;
+      const int first = std::max(0, at - r), last = std::min(length - 1, at + r);
+      for (int c = 0; c < image.channels; ++c) {
+        double s = 0;
+        for (int k = first; k <= last; ++k) s += alongRows ? image.at(k, y, c) : image.at(x, k, c);
+        out.at(x, y, c) = float(s / (last - first + 1));
+      }
+    }
+  return out;
+}
+
 }  // namespace
 
 Image boxMean(const Image& image, int r) {
   if (r <= 0) return image;
-  Image rows(image.width, image.height, image.channels), out = rows;
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x)
-      for (int c = 0; c < image.channels; ++c) {
-        double s = 0;
-        int n = 0;
-        for (int k = std::max(0, x - r); k <= std::min(image.width - 1, x + r); ++k, ++n)
-          s += image.at(k, y, c);
-        rows.at(x, y, c) = float(s / n);
-      }
-  for (int y = 0; y < image.height; ++y)
-    for (int x = 0; x < image.width; ++x)
-      for (int c = 0; c < image.channels; ++c) {
-        double s = 0;
-        int n = 0;
-        for (int k = std::max(0, y - r); k <= std::min(image.height - 1, y + r); ++k, ++n)
-          s += rows.at(x, k, c);
-        out.at(x, y, c) = float(s / n);
-      }
-  return out;
+  return lineMean(lineMean(image, r, true), r, false);
 }
 
 LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& frame,
