@@ -751,6 +751,11 @@ TEST_CASE(
     REQUIRE(r.weights.neighbours.size() == 2);
     const std::vector<const Image*> results = imagesOf(*frames, &temporal::WindowFrame::denoised);
     CHECK(temporal::filterWith(r.weights, results).pixels == r.color.pixels);
+    // The renders accumulate as the filter accumulated them, bit for bit.
+    const std::vector<const Image*> renders = imagesOf(*frames, &temporal::WindowFrame::noisy);
+    CHECK(temporal::accumulateWith(r.weights, renders, results).pixels == r.history.pixels);
+    CHECK_THROWS_AS(temporal::accumulateWith(r.weights, {nullptr, nullptr, nullptr}, results),
+                    std::invalid_argument);
     // A neighbour without the image is left out; alone, the frame's own is kept.
     CHECK(temporal::filterWith(r.weights, {nullptr, results[1], nullptr}).pixels ==
           results[1]->pixels);
@@ -815,6 +820,49 @@ TEST_CASE("a view-dependent pass takes a neighbour only where the surface stood 
   const temporal::FilterWeights panWeights = temporal::filterFrame(windowOf(pan), 1).weights;
   REQUIRE(panWeights.neighbours.size() == 2);
   CHECK(temporal::filterWith(panWeights, images, 0.5).pixels == pass[1].pixels);
+}
+
+TEST_CASE("a relit neighbour's pass is not taken where that pass's light came or went") {
+  // A torch moved: the neighbours' beauty is relit (brighter over the frame),
+  // and the torch's own pass lit the columns 8-23 there, 0-15 in the frame;
+  // elsewhere its light is a hundredth (a bounce).
+  const Synthetic truth = makeFrame(32, 24, 0, 0);
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 500, 600);
+  for (unsigned t : {0u, 2u}) {
+    for (float& v : frames[t].denoised.pixels) v *= 1.2f;
+    for (float& v : frames[t].noisy.pixels) v *= 1.2f;
+  }
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
+  REQUIRE(r.stats.relit == 2);
+  std::vector<Image> pass = stillPass(truth, 3, 0.5f, 1500);
+  auto litWithin = [](Image& image, int from, int to) {
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < image.width; ++x)
+        for (int c = 0; c < 3; ++c)
+          if (x < from || x >= to) image.at(x, y, c) *= 0.01f;
+  };
+  std::vector<Image> render = stillPass(truth, 3, 0.5f, 1600);  // its noisier renders
+  litWithin(pass[0], 8, 24), litWithin(pass[1], 0, 16), litWithin(pass[2], 8, 24);
+  litWithin(render[0], 8, 24), litWithin(render[1], 0, 16), litWithin(render[2], 8, 24);
+  const Image filtered = temporal::filterWith(r.weights, pointersTo(pass));
+  const Image accumulated =
+      temporal::accumulateWith(r.weights, pointersTo(render), pointersTo(pass));
+  // Where a 3x3 box holds the light in one frame only, the frame's own pass and render.
+  double own = 0.0, both = 0.0;
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 32; ++x)
+      for (int c = 0; c < 3; ++c) {
+        if (x < 7 || (x > 16 && x < 24)) {
+          CHECK(filtered.at(x, y, c) == pass[1].at(x, y, c));
+          CHECK(accumulated.at(x, y, c) == render[1].at(x, y, c));
+        }
+        if (x < 9 || x > 14) continue;
+        // Lit in all three: averaged, the leftover error falls.
+        const float light = 0.5f * truth.color.at(x, y, c);
+        own += std::pow(pass[1].at(x, y, c) - light, 2);
+        both += std::pow(filtered.at(x, y, c) - light, 2);
+      }
+  CHECK(both < 0.7 * own);
 }
 
 TEST_CASE(

@@ -251,6 +251,27 @@ TEST_CASE("device filter: relit neighbours and a change of light agree") {
   const Both relitByLightTest = filterBoth(windowOf(frames), 1, byLightTest);
   CHECK(relitByLightTest.cpu.stats.relit == 2);
   checkSameFilter("relit by the light test", relitByLightTest);
+  // A pass whose light moved (a torch's pool): the relit neighbours' pass is
+  // not taken where its light came or went, alike.
+  std::vector<Image> pool;
+  std::vector<torch::Tensor> poolOnDevice;
+  for (unsigned t = 0; t < frames.size(); ++t) {
+    pool.push_back(frames[t].denoised);
+    const int from = t == 1 ? 0 : 4, to = t == 1 ? 8 : pool[t].width;  // where it is lit
+    for (int y = 0; y < pool[t].height; ++y)
+      for (int x = 0; x < pool[t].width; ++x)
+        for (int c = 0; c < 3; ++c)
+          if (x < from || x >= to) pool[t].at(x, y, c) *= 0.01f;
+    poolOnDevice.push_back(pixelsToDevice(pool[t], kCpu));
+  }
+  const Image poolOnHost = filterWith(relit.cpu.weights, {&pool[0], &pool[1], &pool[2]});
+  checkAgrees("a moved pool",
+              pixelsToImage(filterWith(relit.device.weights,
+                                       {&poolOnDevice[0], &poolOnDevice[1], &poolOnDevice[2]}),
+                            pool[1].width, pool[1].height),
+              poolOnHost);
+  CHECK(poolOnHost.at(1, 4, 0) == pool[1].at(1, 4, 0));
+  CHECK(poolOnHost.at(5, 4, 0) != pool[1].at(5, 4, 0));
 
   // Light changing from pixel to pixel: left out whole, the frame's own exactly.
   std::mt19937 random(42);

@@ -121,7 +121,8 @@ output:
                       layers are then float (docs/dndenoise.md#light-passes)
   --passes-temporal light|all|off
                       on a sequence with motion vectors: the light passes
-                      filtered over time with the beauty's weights, the
+                      filtered over time with the beauty's weights, their
+                      renders accumulated and denoised again as its are, the
                       residual closing the sum (light, default); the colour
                       passes too (all); every pass as denoised alone (off)
 display (PNG/JPEG/TIFF outputs and --preview):

@@ -15,6 +15,7 @@ namespace dn {
 namespace {
 
 constexpr char kLargeSet[] = "hdr_calb_cnrm_large";
+constexpr char kDefaultSet[] = "hdr_alb_nrm";  // as a sequence's accumulated render takes it
 // Below this a colour pass counts as black: its term explains nothing there,
 // and none of the beauty's difference is put into its lights.
 constexpr float kBlackColor = 1e-6f;
@@ -51,14 +52,6 @@ Image cleanColorPass(const OidnBase& base, const Image& pass, const OidnRunOptio
   Image out = runNetwork(base, "alb", {{"albedo", scaled}}, run);
   for (float& v : out.pixels) v *= peak;
   return out;
-}
-
-// A light pass (HDR, non-negative) by the large network for clean guides.
-Image denoiseLight(const OidnBase& base, const Image& light, const Image& albedo,
-                   const Image& normal, const OidnRunOptions& run) {
-  if (allZero(light)) return light;
-  return runNetwork(base, kLargeSet, {{"color", light}, {"albedo", albedo}, {"normal", normal}},
-                    run);
 }
 
 // A signed pass (the residual): its positive and negative parts apart.
@@ -183,6 +176,13 @@ Image lineMean(const Image& image, int r, bool alongRows) {
 Image boxMean(const Image& image, int r) {
   if (r <= 0) return image;
   return lineMean(lineMean(image, r, true), r, false);
+}
+
+Image denoiseLight(const OidnBase& base, const Image& light, const Image& albedo,
+                   const Image& normal, const OidnRunOptions& run, bool large) {
+  if (allZero(light)) return light;
+  return runNetwork(base, large ? kLargeSet : kDefaultSet,
+                    {{"color", light}, {"albedo", albedo}, {"normal", normal}}, run);
 }
 
 LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& frame,

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "dn/infer/oidn_pipeline.h"
 #include "dn/io/buffer_io.h"
 
 namespace dn {
@@ -22,15 +23,18 @@ bool filteredOverTime(const LightPassLayout& layout, const std::string& key,
 
 }  // namespace
 
-temporal::Sequence::MakeCompanions lightPassCompanions(const OidnBase& base,
-                                                       const SequencePassOptions& options) {
-  return [base, options](const std::string& path, const FrameBuffers& frame) {
+temporal::CompanionMaker lightPassCompanions(const OidnBase& base,
+                                             const SequencePassOptions& options) {
+  PassDenoiseOptions apart = options.denoise;
+  // The sum closes it on the filtered passes; only a sharing rule reads it.
+  apart.residualAlone = apart.share != ShareRule::None;
+  // The accumulated renders are denoised with the first-hit albedo.
+  const bool again = options.accumulated && apart.guide == LightPassGuide::Albedo;
+  temporal::CompanionMaker maker;
+  maker.make = [base, options, apart, again](const std::string& path, const FrameBuffers& frame) {
     const LightPassLayout layout = passLayoutOfFrame(path, frame);
-    PassDenoiseOptions apart = options.denoise;
-    // The sum closes it on the filtered passes; only a sharing rule reads it.
-    apart.residualAlone = apart.share != ShareRule::None;
-    const LightPassImages passes =
-        denoisePassesApart(base, frame, layout, readLightPasses(path, layout, frame), apart);
+    const LightPassImages noisy = readLightPasses(path, layout, frame);
+    const LightPassImages passes = denoisePassesApart(base, frame, layout, noisy, apart);
     temporal::Companions companions;
     for (const auto& [key, image] : passes) {
       Companion& companion = companions[key];
@@ -38,9 +42,22 @@ temporal::Sequence::MakeCompanions lightPassCompanions(const OidnBase& base,
       companion.overTime = key != kResidualPass && filteredOverTime(layout, key, options.overTime);
       const LightPassSpec* spec = layout.rule->find(key);
       companion.viewDependent = spec && spec->viewDependent;
+      if (again && companion.overTime && spec && !spec->isColor) companion.render = noisy.at(key);
     }
     return companions;
   };
+  if (again)
+    maker.denoiseAccumulated = [base, apart](const FrameBuffers& guides,
+                                             const std::map<std::string, Image>& accumulated) {
+      const FrameBuffers clean =
+          guides.auxPrefiltered ? guides : withCleanAux(base, guides, apart.run, apart.run);
+      std::map<std::string, Image> out;
+      for (const auto& [key, render] : accumulated)
+        out[key] =
+            denoiseLight(base, render, clean.get("albedo"), clean.get("normal"), apart.run, false);
+      return out;
+    };
+  return maker;
 }
 
 Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius) {

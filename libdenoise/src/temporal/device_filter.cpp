@@ -488,10 +488,23 @@ Tensor trustedBoxMean(const Tensor& image, const Tensor& trusted, int r, const G
       .to(torch::kFloat);
 }
 
+// temporal_filter.cpp's: 0 in every channel where the boxes' light differs
+// by more than `range` times either way (not taken: relitWeight).
 Tensor relightFactor(const Tensor& moved, const Tensor& own, const Tensor& trust, int r,
-                     const Grid& g) {
+                     double range, const Grid& g) {
   const Tensor a = trustedBoxMean(own, trust > 0, r, g), b = trustedBoxMean(moved, trust > 0, r, g);
-  return torch::where((a >= 0) & (b > 1e-6f), (a / b).clamp(0.1f, 10.0f), torch::ones_like(a));
+  const float low = static_cast<float>(1.0 / range), high = static_cast<float>(range);
+  const Tensor ratio =
+      torch::where((a >= 0) & (b > 1e-6f), (a / b).clamp(low, high), torch::ones_like(a));
+  const Tensor ownLight = a.to(torch::kDouble).sum(0), movedLight = b.to(torch::kDouble).sum(0);
+  const Tensor unlit =
+      (a[0] >= 0) & ((ownLight > range * movedLight) | (movedLight > range * ownLight));
+  return torch::where(unlit.unsqueeze(0), torch::zeros_like(ratio), ratio);
+}
+
+// `weight` where relightFactor gave `factor` a ratio, 0 where it did not.
+Tensor relitWeight(const Tensor& weight, const Tensor& factor) {
+  return torch::where(factor[0] == 0, torch::zeros_like(weight), weight);
 }
 
 // The renders' light test: per pixel, standard errors of the box means' difference.
@@ -557,14 +570,17 @@ Contribution contributionOf(const Centre& centre, const DeviceFrame& neighbour,
   Tensor light = lightChange(centre.noisyMapped, reprojectNearest(neighbourNoisy, positions, g),
                              trust, centre.residual, residual, options.lightBox, g);
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
+  Tensor relitTrust;  // relit: where its factor is defined
   // A change of light over most of the frame: relit first, left out whole
   // if that does not bring the spread down (temporal_filter.cpp).
   if (fullSpread > options.changedLightSpread ||
       trustedMean(light, trust) > options.changedLightMean) {
-    out.relight = relightFactor(out.image, centre.frame->denoised, trust, options.relightBox, g);
+    out.relight = relightFactor(out.image, centre.frame->denoised, trust, options.relightBox,
+                                options.relightRange, g);
     out.image = out.image * out.relight;
     if (out.history.defined()) out.history = out.history * out.relight;
-    fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
+    relitTrust = relitWeight(trust, out.relight);
+    fullSpread = robustSpread(normalisedDifference(centre, out.image), relitTrust);
     if (fullSpread > options.changedLightSpread) {
       out.verdict = Contribution::Verdict::ChangedLight;
       return out;
@@ -575,7 +591,7 @@ Contribution contributionOf(const Centre& centre, const DeviceFrame& neighbour,
   out.spread = std::min(fullSpread, options.maxSpread);
   // The renders' own light test would see the change that relighting undid.
   if (out.relight.defined()) {
-    out.weight = trust.clone();
+    out.weight = relitTrust;
     out.resampling = std::move(plan);
     return out;
   }
@@ -837,6 +853,7 @@ FilterWeights DeviceFilterWeights::toHost() const {
   FilterWeights out;
   out.centre = centre;
   out.relightBox = relightBox;
+  out.relightRange = relightRange;
   for (const DeviceNeighbourWeights& nb : neighbours)
     out.neighbours.push_back(
         {nb.frame, nb.resampling.toHost(width, height), nb.relit, toDoubles(nb.weight)});
@@ -902,6 +919,7 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
   DeviceFilterWeights& weights = result.weights;
   weights.centre = centre;
   weights.relightBox = options.relightBox;
+  weights.relightRange = options.relightRange;
   weights.width = current.width, weights.height = current.height;
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& n = contributions[k];
@@ -924,11 +942,16 @@ torch::Tensor filterWith(const DeviceFilterWeights& weights,
     const Tensor* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
     if (!image || !image->defined() || image->sizes() != own.sizes()) continue;
     Tensor in = resample(nb.resampling, *image, g);
-    if (nb.relit) in = in * relightFactor(in, own, nb.resampling.trust, weights.relightBox, g);
+    Tensor weight = nb.weight;
+    if (nb.relit) {  // this image's own factor
+      const Tensor factor =
+          relightFactor(in, own, nb.resampling.trust, weights.relightBox, weights.relightRange, g);
+      in = in * factor;
+      weight = relitWeight(weight, factor);
+    }
     moved.push_back(in);
-    used.push_back(stillPixels > 0.0
-                       ? nb.weight * stillness(nb.resampling.positions, stillPixels, g)
-                       : nb.weight);
+    used.push_back(stillPixels > 0.0 ? weight * stillness(nb.resampling.positions, stillPixels, g)
+                                     : weight);
   }
   std::vector<Weighted> others;
   for (std::size_t k = 0; k < moved.size(); ++k) others.push_back({&moved[k], &used[k]});

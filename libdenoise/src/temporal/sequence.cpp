@@ -216,19 +216,20 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
 }
 
 const Companions& Sequence::companionsOf(int number, const FrameBuffers* given, const Read& read,
-                                         const MakeCompanions& make) {
+                                         const CompanionMaker& make) {
   Input& entry = *inputs_.at(number);
   if (!entry.companions) {
     const std::string path = fileOf(number);
-    entry.companions = make(path, given ? *given : read(path));
+    entry.companions = make.make(path, given ? *given : read(path));
   }
   return *entry.companions;
 }
 
-std::map<std::string, Image> Sequence::filteredCompanions(int number, const FrameBuffers& frame,
+Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const FrameBuffers& frame,
                                                           const FilterWeights& weights,
                                                           const Read& read,
-                                                          const MakeCompanions& make) {
+                                                          const CompanionMaker& make,
+                                                          bool accumulate) {
   // Window index k is frame number - radius + k; only the frames the colour
   // took something from are needed.
   const int first = number - static_cast<int>(weights.centre);
@@ -236,32 +237,36 @@ std::map<std::string, Image> Sequence::filteredCompanions(int number, const Fram
   made[weights.centre] = &companionsOf(number, &frame, read, make);
   for (const NeighbourWeights& nb : weights.neighbours)
     made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), nullptr, read, make);
-  std::map<std::string, Image> out;
+  const std::size_t size = made.rbegin()->first + 1;
+  FilteredCompanions out;
   for (const auto& [name, own] : *made.at(weights.centre)) {
     if (!own.overTime) {
-      out[name] = own.image;
+      out.filtered[name] = own.image;
       continue;
     }
-    std::vector<const Image*> images(weights.centre + 1, nullptr);
+    std::vector<const Image*> images(size, nullptr), renders(size, nullptr);
     for (const auto& [index, companions] : made) {
-      if (index >= images.size()) images.resize(index + 1, nullptr);
       auto it = companions->find(name);
-      if (it != companions->end()) images[index] = &it->second.image;
+      if (it == companions->end()) continue;
+      images[index] = &it->second.image;
+      if (!it->second.render.empty()) renders[index] = &it->second.render;
     }
-    out[name] =
-        filterWith(weights, images, own.viewDependent ? settings_.filter.viewDependentMotion : 0.0);
+    const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;
+    out.filtered[name] = filterWith(weights, images, still);
+    if (accumulate && !own.render.empty())
+      out.accumulated[name] = accumulateWith(weights, renders, images, still);
   }
   return out;
 }
 
 DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
                                 const Read& read, const Denoise& denoise) {
-  return this->denoise(file, frame, read, denoise, nullptr).result;
+  return this->denoise(file, frame, read, denoise, CompanionMaker()).result;
 }
 
 Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameBuffers& frame,
                                            const Read& read, const Denoise& denoise,
-                                           const MakeCompanions& make) {
+                                           const CompanionMaker& companions) {
   const int n = numbers_.at(file);
   forget(n);
   lastNumber_ = n;
@@ -273,25 +278,36 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   lastStats_ = self.result.stats;
   lastWithoutMotion_ = inputs_.at(n)->frame.motion.empty();
   WithCompanions out{*self.alone, {}};
-  // The passes first, so that the neighbours' taps and weights are gone
-  // before the history's network run (about 21 bytes a pixel a neighbour).
-  if (make)
-    out.companions = filteredCompanions(
-        n, frame, self.device ? self.device->weights.toHost() : self.result.weights, read, make);
+  // The companions first, so that the neighbours' taps and weights are gone
+  // before the networks run again (about 21 bytes a pixel a neighbour).
+  FilteredCompanions passes;
+  if (companions.make)
+    passes = filteredCompanions(
+        n, frame, self.device ? self.device->weights.toHost() : self.result.weights, read,
+        companions,
+        share > 0.0 && companions.denoiseAccumulated && self.result.stats.accumulatedFrames > 1.0);
   self.result.weights = FilterWeights();
   DenoiseResult& result = out.result;
   if (self.device) {
     self.device->weights = DeviceFilterWeights();
     if (share > 0.0) denoisedHistory(n, frame, self.result, denoise);
     result.color = blendOnDevice(n, *self.device, share);
-    return out;
+  } else {
+    result.color = std::move(self.result.color);
+    if (share > 0.0) {
+      const Image own = denoisedHistory(n, frame, self.result, denoise);
+      result.color =
+          blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
+    }
   }
-  result.color = std::move(self.result.color);
-  if (share > 0.0) {
-    const Image own = denoisedHistory(n, frame, self.result, denoise);
-    result.color =
-        blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
+  if (!passes.accumulated.empty()) {
+    const Input& input = *inputs_.at(n);
+    const FrameBuffers guides =
+        withHistory(frame, frame.get("color"), input.cleanAlbedo, input.cleanNormal);
+    for (auto& [name, again] : companions.denoiseAccumulated(guides, passes.accumulated))
+      passes.filtered.at(name) = blendWithHistory(passes.filtered.at(name), again, share);
   }
+  out.companions = std::move(passes.filtered);
   return out;
 }
 

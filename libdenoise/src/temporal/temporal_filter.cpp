@@ -202,15 +202,37 @@ Image trustedBoxMean(const Image& image, const Image& trust, int r) {
 // and channel, the ratio of the frame's and the neighbour's results, each
 // averaged over the (2r+1)^2 box of trusted pixels around (1 where undefined).
 // What the neighbour adds is then its detail within the box, whose leftover
-// error differs from the frame's.
-Image relightFactor(const Image& moved, const Image& own, const Image& trust, int r) {
+// error differs from the frame's. Where the boxes' light differs by more than
+// `range` times either way (a lamp's pool arrived or left), no factor brings
+// that detail to the frame's light: 0 in every channel, and the pixel is not
+// taken (relitWeight).
+Image relightFactor(const Image& moved, const Image& own, const Image& trust, int r, double range) {
   const Image ownMean = trustedBoxMean(own, trust, r), movedMean = trustedBoxMean(moved, trust, r);
-  Image factor(moved.width, moved.height, moved.channels, 1.0f);
-  for (std::size_t i = 0; i < factor.pixels.size(); ++i) {
-    const float a = ownMean.pixels[i], b = movedMean.pixels[i];
-    if (a >= 0.0f && b > 1e-6f) factor.pixels[i] = std::clamp(a / b, 0.1f, 10.0f);
+  const int channels = moved.channels;
+  Image factor(moved.width, moved.height, channels, 1.0f);
+  const float low = static_cast<float>(1.0 / range), high = static_cast<float>(range);
+  for (std::size_t i = 0; i < factor.pixelCount(); ++i) {
+    const float* a = &ownMean.pixels[i * channels];
+    const float* b = &movedMean.pixels[i * channels];
+    if (a[0] < 0.0f) continue;  // no trusted pixel in the box
+    double ownLight = 0.0, movedLight = 0.0;
+    for (int c = 0; c < channels; ++c) ownLight += a[c], movedLight += b[c];
+    float* f = &factor.pixels[i * channels];
+    if (ownLight > range * movedLight || movedLight > range * ownLight) {
+      std::fill_n(f, channels, 0.0f);
+      continue;
+    }
+    for (int c = 0; c < channels; ++c)
+      if (b[c] > 1e-6f) f[c] = std::clamp(a[c] / b[c], low, high);
   }
   return factor;
+}
+
+// `weight` left where relightFactor gave `factor` a ratio, 0 where it did not.
+std::vector<double> relitWeight(std::vector<double> weight, const Image& factor) {
+  for (std::size_t i = 0; i < weight.size(); ++i)
+    if (factor.pixels[i * factor.channels] == 0.0f) weight[i] = 0.0;
+  return weight;
 }
 
 // The channels of `a`, then those of `b`, per pixel: reprojected in one call,
@@ -338,6 +360,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
       lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
                   centre.residual, residual, options.lightBox);
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
+  Image relitTrust;  // relit: where its factor is defined
   // Where the light changed over most of the frame (a moving lamp, the sun),
   // shading changes too faint for the per-pixel tests are everywhere: the
   // differences' spread is large, or the renders' light test is high on
@@ -346,10 +369,14 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   // keeps moving shadows rejected.
   if (fullSpread > options.changedLightSpread ||
       trustedMean(light, trust) > options.changedLightMean) {
-    out.relight = relightFactor(out.image, current.denoised, trust, options.relightBox);
+    out.relight =
+        relightFactor(out.image, current.denoised, trust, options.relightBox, options.relightRange);
     out.image = scaled(std::move(out.image), out.relight);
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
-    fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
+    relitTrust = trust;
+    for (std::size_t i = 0; i < relitTrust.pixels.size(); ++i)
+      if (out.relight.pixels[i * out.relight.channels] == 0.0f) relitTrust.pixels[i] = 0.0f;
+    fullSpread = robustSpread(normalisedDifference(centre, out.image), relitTrust);
     if (fullSpread > options.changedLightSpread) {
       out.verdict = Contribution::Verdict::ChangedLight;
       return out;
@@ -361,7 +388,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
   out.weight.assign(out.image.pixelCount(), 0.0);
   // The renders' own light test would see the change that relighting undid.
   if (!out.relight.empty()) {
-    std::copy(trust.pixels.begin(), trust.pixels.end(), out.weight.begin());
+    std::copy(relitTrust.pixels.begin(), relitTrust.pixels.end(), out.weight.begin());
     out.resampling = std::move(plan);
     return out;
   }
@@ -601,6 +628,7 @@ FilterWeights weightsOf(std::vector<Contribution> contributions,
   FilterWeights out;
   out.centre = centre;
   out.relightBox = options.relightBox;
+  out.relightRange = options.relightRange;
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
@@ -703,34 +731,66 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   return result;
 }
 
-Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
-                 double stillPixels) {
-  if (weights.centre >= images.size() || !images[weights.centre])
-    throw std::invalid_argument("filterWith: the centre frame's image is missing");
-  const Image& own = *images[weights.centre];
+namespace {
+
+// `images` over the window by `weights`, each neighbour's brought in
+// resampled (or at the nearest pixel: a render, whose noise resampling would
+// correlate), a relit one by the factor of its `lightOf` image, as filterWith
+// and accumulateWith document.
+Image combineOver(const char* caller, const FilterWeights& weights,
+                  const std::vector<const Image*>& images, const std::vector<const Image*>& lightOf,
+                  double stillPixels, bool nearest) {
+  auto at = [](const std::vector<const Image*>& v, std::size_t k) {
+    return k < v.size() ? v[k] : nullptr;
+  };
+  const Image* own = at(images, weights.centre);
+  const Image* ownLight = at(lightOf, weights.centre);
+  if (!own || !ownLight)
+    throw std::invalid_argument(std::string(caller) + ": the centre frame's image is missing");
   // Reserved, so that `others` may point into them as they grow.
   std::vector<Image> moved;
-  std::vector<std::vector<double>> gated;  // weights stillPixels took some of
+  std::vector<std::vector<double>> gated;  // weights relighting or stillPixels took some of
   moved.reserve(weights.neighbours.size());
-  gated.reserve(weights.neighbours.size());
+  gated.reserve(2 * weights.neighbours.size());
   std::vector<Weighted> others;
   for (const NeighbourWeights& nb : weights.neighbours) {
-    const Image* image = nb.frame < images.size() ? images[nb.frame] : nullptr;
-    if (!image || !image->sameShape(own)) continue;
-    Image in = motion::resample(nb.resampling, *image);
-    if (nb.relit)
-      in = scaled(std::move(in), relightFactor(in, own, nb.resampling.trust, weights.relightBox));
-    moved.push_back(std::move(in));
+    const Image* image = at(images, nb.frame);
+    const Image* light = at(lightOf, nb.frame);
+    if (!image || !image->sameShape(*own) || !light || !light->sameShape(*ownLight)) continue;
+    Image in = nearest ? motion::reprojectNearest(*image, nb.resampling.positions)
+                       : motion::resample(nb.resampling, *image);
     const std::vector<double>* weight = &nb.weight;
+    if (nb.relit) {
+      // This image's own factor: its light changed by its own ratio.
+      const Image factor =
+          relightFactor(!nearest && image == light ? in : motion::resample(nb.resampling, *light),
+                        *ownLight, nb.resampling.trust, weights.relightBox, weights.relightRange);
+      in = scaled(std::move(in), factor);
+      gated.push_back(relitWeight(nb.weight, factor));
+      weight = &gated.back();
+    }
+    moved.push_back(std::move(in));
     if (stillPixels > 0.0) {
-      gated.push_back(nb.weight);
+      gated.push_back(*weight);
       const Image still = stillness(nb.resampling.positions, stillPixels);
       for (std::size_t i = 0; i < gated.back().size(); ++i) gated.back()[i] *= still.pixels[i];
       weight = &gated.back();
     }
     others.push_back({&moved.back(), weight});
   }
-  return toImage(weightedMean(own, others).value, own);
+  return toImage(weightedMean(*own, others).value, *own);
+}
+
+}  // namespace
+
+Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
+                 double stillPixels) {
+  return combineOver("filterWith", weights, images, images, stillPixels, false);
+}
+
+Image accumulateWith(const FilterWeights& weights, const std::vector<const Image*>& renders,
+                     const std::vector<const Image*>& results, double stillPixels) {
+  return combineOver("accumulateWith", weights, renders, results, stillPixels, true);
 }
 
 Image historyMean(const Image& own, const TemporalResult& result, const TemporalOptions& options) {

@@ -67,6 +67,11 @@ struct DenoisedPasses {
   double maxRelativeError = 0;  // recombine(passes) against the denoised beauty
 };
 
+// A light pass (HDR, non-negative) denoised by OIDN's large network (or the
+// default-size one) with cleaned guides; all zero stays so, without a run.
+Image denoiseLight(const OidnBase& base, const Image& light, const Image& albedo,
+                   const Image& normal, const OidnRunOptions& run, bool large = true);
+
 // Each pass of `noisy` (readLightPasses of `frame`, which holds albedo and
 // normal) denoised alone, the residual included, with the guides of
 // `options.guide`: the first step of denoiseLightPasses.

@@ -65,6 +65,7 @@ struct DeviceNeighbourWeights {
 struct DeviceFilterWeights {
   std::size_t centre = 0;
   int relightBox = 1;
+  double relightRange = 10.0;
   int width = 0, height = 0;
   std::vector<DeviceNeighbourWeights> neighbours;
   bool empty() const { return neighbours.empty(); }

@@ -50,17 +50,31 @@ struct Companion {
   // Light that moves with the view (a glossy pass): its neighbours count only
   // where the surface stood still (TemporalOptions::viewDependentMotion).
   bool viewDependent = false;
+  // The image as rendered, where it is denoised again once accumulated as
+  // the colour's render is (CompanionMaker::denoiseAccumulated); else empty.
+  Image render;
 };
 using Companions = std::map<std::string, Companion>;
+
+// How each frame's companions are made and, where they carry their render,
+// their accumulated renders denoised.
+struct CompanionMaker {
+  // A frame's companions, from its file and its buffers as Sequence's Read gives them.
+  std::function<Companions(const std::string& path, const FrameBuffers& frame)> make;
+  // The companions' accumulated renders (by name) denoised, with `guides`:
+  // the frame's albedo and normal, cleaned where guides.auxPrefiltered. Each
+  // result is then blended with its filtered companion by
+  // TemporalOptions::accumulatedShare, as the colour is. Unset: filtered only.
+  std::function<std::map<std::string, Image>(const FrameBuffers& guides,
+                                             const std::map<std::string, Image>& accumulated)>
+      denoiseAccumulated;
+};
 
 class Sequence {
  public:
   using Read = std::function<FrameBuffers(const std::string& path)>;
   // Denoises `frame`, which is the frame of file `path`.
   using Denoise = std::function<DenoiseResult(const std::string& path, const FrameBuffers& frame)>;
-  // A frame's companions, from its file and its buffers as Read gives them.
-  using MakeCompanions =
-      std::function<Companions(const std::string& path, const FrameBuffers& frame)>;
 
   // The plan for the frames `files` of `pattern` ("shot.#.exr"), or nullptr:
   // no files, a file not of the pattern, or no motion vectors (then `why`
@@ -78,15 +92,17 @@ class Sequence {
 
   // The same, and the frame's companions by name, each filtered over the
   // window with the colour's weights (the same neighbours, taps and per-pixel
-  // weights; dn::temporal::filterWith), or as made where not overTime. Each
-  // frame's are made once, by `make`, for the frames the colour took
-  // something from, and kept while the frame is in the window.
+  // weights; dn::temporal::filterWith), or as made where not overTime; those
+  // with a render also blended with their accumulated render denoised, as
+  // the colour is. Each frame's are made once, by `companions.make`, for the
+  // frames the colour took something from, and kept while the frame is in
+  // the window.
   struct WithCompanions {
     DenoiseResult result;
     std::map<std::string, Image> companions;
   };
   WithCompanions denoise(const std::string& file, const FrameBuffers& frame, const Read& read,
-                         const Denoise& denoise, const MakeCompanions& make);
+                         const Denoise& denoise, const CompanionMaker& companions);
   // The same with `denoiser`: each frame read with the buffers it needs.
   DenoiseResult denoise(const std::string& file, const Denoiser& denoiser,
                         const DenoiseOptions& options);
@@ -126,10 +142,15 @@ class Sequence {
   void makePastHistories(int number, const Read& read, const Denoise& denoise);
   // Frame `number`'s companions, made by `make` (from `given`, or read) if not yet.
   const Companions& companionsOf(int number, const FrameBuffers* given, const Read& read,
-                                 const MakeCompanions& make);
-  std::map<std::string, Image> filteredCompanions(int number, const FrameBuffers& frame,
-                                                  const FilterWeights& weights, const Read& read,
-                                                  const MakeCompanions& make);
+                                 const CompanionMaker& make);
+  // The companions filtered over the window, and those with a render
+  // accumulated (by name).
+  struct FilteredCompanions {
+    std::map<std::string, Image> filtered, accumulated;
+  };
+  FilteredCompanions filteredCompanions(int number, const FrameBuffers& frame,
+                                        const FilterWeights& weights, const Read& read,
+                                        const CompanionMaker& make, bool accumulate);
   // The frame on settings_.filterDevice, copied there on first use.
   const DeviceFrame& onDevice(Input& input) const;
   // The filtered colour blended with the accumulated render denoised (and

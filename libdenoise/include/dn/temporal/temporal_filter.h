@@ -88,6 +88,12 @@ struct TemporalOptions {
   // half, but haloed a spotlight's edge as it swept a room (held out: a frame
   // 6.6 dB worse).
   int relightBox = 1;
+  // Relighting takes a pixel only where the boxes' light differs by at most
+  // this factor either way: beyond it a lamp's pool arrived or left, and a
+  // factor clamped to the range brought the wrong light (a held-out shot's
+  // torch lost 4 dB in its direct-light pass). 10 (the clamp before) and 4
+  // chose alike on the tuning half; 2 lost 0.01 dB.
+  double relightRange = 10.0;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
   // lightLow standard errors to 0 at lightHigh (a change of light).
@@ -162,6 +168,7 @@ struct NeighbourWeights {
 struct FilterWeights {
   std::size_t centre = 0;
   int relightBox = 1;
+  double relightRange = 10.0;
   std::vector<NeighbourWeights> neighbours;  // those it used, in the order of its sums
   bool empty() const { return neighbours.empty(); }
 };
@@ -196,6 +203,16 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
 // not the surface (TemporalOptions::viewDependentMotion).
 Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
                  double stillPixels = 0.0);
+
+// `renders` (each window frame's render of any image, nullptr where none)
+// accumulated as the colour's renders were (TemporalResult::history): each
+// neighbour's brought in at the nearest pixel and weighed as filterWith
+// weighs it, a relit one by the factor of its `results` image (the same
+// image denoised), stillPixels as there. With the frames' renders and results
+// it gives TemporalResult::history bit for bit. Throws std::invalid_argument
+// when the centre's render or result is missing.
+Image accumulateWith(const FilterWeights& weights, const std::vector<const Image*>& renders,
+                     const std::vector<const Image*>& results, double stillPixels = 0.0);
 
 // The frame's accumulated render, denoised (`own`), averaged with its past
 // neighbours' as its result was with theirs where the surface stood still,
