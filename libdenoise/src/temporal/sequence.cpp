@@ -1,5 +1,6 @@
 #include "dn/temporal/sequence.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <optional>
@@ -58,6 +59,11 @@ FrameBuffers withHistory(const FrameBuffers& frame, Image history, const Image& 
     out.auxPrefiltered = true;
   }
   return out;
+}
+
+bool allZero(const Image* image) {
+  return !image ||
+         std::all_of(image->pixels.begin(), image->pixels.end(), [](float v) { return v == 0.0f; });
 }
 
 template <class Map>
@@ -250,6 +256,13 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Fram
       if (it == companions->end()) continue;
       images[index] = &it->second.image;
       if (!it->second.render.empty()) renders[index] = &it->second.render;
+    }
+    // A pass no frame of the window has (Cycles writes transmission black
+    // where nothing transmits) stays black, without resampling.
+    if (std::all_of(images.begin(), images.end(), [](const Image* i) { return allZero(i); }) &&
+        std::all_of(renders.begin(), renders.end(), [](const Image* i) { return allZero(i); })) {
+      out.filtered[name] = own.image;
+      continue;
     }
     const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;
     out.filtered[name] = filterWith(weights, images, still);
