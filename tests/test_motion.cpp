@@ -338,6 +338,19 @@ std::vector<temporal::WindowFrame> stillShot(const Synthetic& truth, unsigned co
   return frames;
 }
 
+// Three frames of a still shot whose neighbours (frames 0 and 2) are lit 20%
+// brighter everywhere: a lamp moved, too faint a change for the per-pixel
+// tests at this noise, too wide to be a shadow.
+std::vector<temporal::WindowFrame> brighterNeighbours(const Synthetic& truth, unsigned noiseSeed,
+                                                      unsigned leftoverSeed) {
+  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, noiseSeed, leftoverSeed);
+  for (unsigned t : {0u, 2u}) {
+    for (float& v : frames[t].denoised.pixels) v *= 1.2f;
+    for (float& v : frames[t].noisy.pixels) v *= 1.2f;
+  }
+  return frames;
+}
+
 // Three frames of a pan, a pixel a frame, their seeds counting up from the two given.
 std::vector<temporal::WindowFrame> panShot(unsigned noiseSeed, unsigned leftoverSeed) {
   std::vector<temporal::WindowFrame> frames;
@@ -545,13 +558,7 @@ TEST_CASE("temporal filter: a blotch in the frame's own result is averaged out, 
 
 TEST_CASE("temporal filter: a neighbour whose light changed over the frame is relit first") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 500, 600);
-  // A lamp moved: the neighbours are lit 20% brighter everywhere, too faint a
-  // change for the per-pixel tests at this noise, too wide to be a shadow.
-  for (unsigned t : {0u, 2u}) {
-    for (float& v : frames[t].denoised.pixels) v *= 1.2f;
-    for (float& v : frames[t].noisy.pixels) v *= 1.2f;
-  }
+  const std::vector<temporal::WindowFrame> frames = brighterNeighbours(truth, 500, 600);
   const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
   CHECK(r.stats.relit == 2);
   CHECK(r.stats.changedLight == 0);
@@ -741,11 +748,7 @@ TEST_CASE(
   // A pan (resampled taps, the screen's edge), a still shot, and neighbours relit first.
   std::vector<temporal::WindowFrame> pan = panShot(40, 50);
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> relit = stillShot(truth, 3, 500, 600);
-  for (unsigned t : {0u, 2u}) {
-    for (float& v : relit[t].denoised.pixels) v *= 1.2f;
-    for (float& v : relit[t].noisy.pixels) v *= 1.2f;
-  }
+  std::vector<temporal::WindowFrame> relit = brighterNeighbours(truth, 500, 600);
   for (const auto* frames : {&pan, &relit}) {
     const temporal::TemporalResult r = temporal::filterFrame(windowOf(*frames), 1);
     REQUIRE(r.weights.neighbours.size() == 2);
@@ -827,11 +830,7 @@ TEST_CASE("a relit neighbour's pass is not taken where that pass's light came or
   // and the torch's own pass lit the columns 8-23 there, 0-15 in the frame;
   // elsewhere its light is a hundredth (a bounce).
   const Synthetic truth = makeFrame(32, 24, 0, 0);
-  std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 500, 600);
-  for (unsigned t : {0u, 2u}) {
-    for (float& v : frames[t].denoised.pixels) v *= 1.2f;
-    for (float& v : frames[t].noisy.pixels) v *= 1.2f;
-  }
+  const std::vector<temporal::WindowFrame> frames = brighterNeighbours(truth, 500, 600);
   const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
   REQUIRE(r.stats.relit == 2);
   std::vector<Image> pass = stillPass(truth, 3, 0.5f, 1500);
