@@ -241,6 +241,8 @@ Image resample(const Resampling& plan, const Image& source) {
     const unsigned char taps = plan.taps[here];
     if (!(taps & kBroughtIn)) continue;
     const float qx = plan.positions.pixels[2 * here], qy = plan.positions.pixels[2 * here + 1];
+    float* value = &out.pixels[here * channels];
+    if ((taps & kCubicTaps) && cubicSample(source, qx, qy, value)) continue;
     double accepted = 0.0;
     std::fill(sum.begin(), sum.end(), 0.0);
     for (int t = 0; t < 4; ++t) {
@@ -250,9 +252,7 @@ Image resample(const Resampling& plan, const Image& source) {
       for (int c = 0; c < channels; ++c)
         sum[c] += tap.weight * source.pixels[tap.index * channels + c];
     }
-    float* value = &out.pixels[here * channels];
-    if (!((taps & kCubicTaps) && cubicSample(source, qx, qy, value)))
-      for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
+    for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
   }
   return out;
 }

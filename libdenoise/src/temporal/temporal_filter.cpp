@@ -757,25 +757,27 @@ Image combineOver(const char* caller, const FilterWeights& weights,
     const Image* image = at(images, nb.frame);
     const Image* light = at(lightOf, nb.frame);
     if (!image || !image->sameShape(*own) || !light || !light->sameShape(*ownLight)) continue;
+    const std::vector<double>* weight = &nb.weight;
+    if (stillPixels > 0.0) {
+      gated.push_back(nb.weight);
+      const Image still = stillness(nb.resampling.positions, stillPixels);
+      for (std::size_t i = 0; i < gated.back().size(); ++i) gated.back()[i] *= still.pixels[i];
+      weight = &gated.back();
+      // Where the whole frame moved, a view-dependent image takes nothing from it.
+      if (std::none_of(weight->begin(), weight->end(), [](double w) { return w > 0.0; })) continue;
+    }
     Image in = nearest ? motion::reprojectNearest(*image, nb.resampling.positions)
                        : motion::resample(nb.resampling, *image);
-    const std::vector<double>* weight = &nb.weight;
     if (nb.relit) {
       // This image's own factor: its light changed by its own ratio.
       const Image factor =
           relightFactor(!nearest && image == light ? in : motion::resample(nb.resampling, *light),
                         *ownLight, nb.resampling.trust, weights.relightBox, weights.relightRange);
       in = scaled(std::move(in), factor);
-      gated.push_back(relitWeight(nb.weight, factor));
+      gated.push_back(relitWeight(*weight, factor));
       weight = &gated.back();
     }
     moved.push_back(std::move(in));
-    if (stillPixels > 0.0) {
-      gated.push_back(*weight);
-      const Image still = stillness(nb.resampling.positions, stillPixels);
-      for (std::size_t i = 0; i < gated.back().size(); ++i) gated.back()[i] *= still.pixels[i];
-      weight = &gated.back();
-    }
     others.push_back({&moved.back(), weight});
   }
   return toImage(weightedMean(*own, others).value, *own);
