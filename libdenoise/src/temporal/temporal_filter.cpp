@@ -228,10 +228,15 @@ Image relightFactor(const Image& moved, const Image& own, const Image& trust, in
   return factor;
 }
 
+// Whether relightFactor gave pixel i of `factor` a ratio (else it is not taken).
+bool relitTaken(const Image& factor, std::size_t i) {
+  return factor.pixels[i * factor.channels] != 0.0f;
+}
+
 // `weight` left where relightFactor gave `factor` a ratio, 0 where it did not.
 std::vector<double> relitWeight(std::vector<double> weight, const Image& factor) {
   for (std::size_t i = 0; i < weight.size(); ++i)
-    if (factor.pixels[i * factor.channels] == 0.0f) weight[i] = 0.0;
+    if (!relitTaken(factor, i)) weight[i] = 0.0;
   return weight;
 }
 
@@ -375,7 +380,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
     relitTrust = trust;
     for (std::size_t i = 0; i < relitTrust.pixels.size(); ++i)
-      if (out.relight.pixels[i * out.relight.channels] == 0.0f) relitTrust.pixels[i] = 0.0f;
+      if (!relitTaken(out.relight, i)) relitTrust.pixels[i] = 0.0f;
     fullSpread = robustSpread(normalisedDifference(centre, out.image), relitTrust);
     if (fullSpread > options.changedLightSpread) {
       out.verdict = Contribution::Verdict::ChangedLight;
