@@ -275,6 +275,35 @@ TEST_CASE("multi-part files with parts of different sizes") {
   CHECK(back.get("albedo").pixels == a.pixels);
 }
 
+TEST_CASE("readImages: several channel groups in one reading, placed in the frame's window") {
+  TempDir dir;
+  PartDesc combined{"ViewLayer.Combined",
+                    layerChannels("ViewLayer.Combined", {"R", "G", "B", "A"}),
+                    {0, 0, 8, 6},
+                    {0, 0, 8, 6},
+                    0};
+  PartDesc albedo{"ViewLayer.Denoising Albedo",
+                  layerChannels("ViewLayer.Denoising Albedo"),
+                  {2, 1, 4, 3},
+                  {0, 0, 8, 6},
+                  1};
+  writeParts(dir / "parts.exr", {combined, albedo});
+  const std::vector<std::string> rgb = layerChannels("ViewLayer.Combined", {"R", "G", "B"});
+  const std::vector<std::string> alb = layerChannels("ViewLayer.Denoising Albedo");
+  const FrameBuffers frame = readFrame(dir / "parts.exr");
+
+  const std::vector<Image> both = readImages(dir / "parts.exr", {rgb, alb}, frame.dataWindow);
+  REQUIRE(both.size() == 2);
+  CHECK(both[0].pixels == readImage(dir / "parts.exr", 0, rgb).pixels);
+  CHECK(both[1].pixels == frame.get("albedo").pixels);  // zeros outside the albedo's part
+  // Without a window, the first group's part's, as readImage reads it.
+  CHECK(readImages(dir / "parts.exr", {alb}).front().pixels ==
+        readImage(dir / "parts.exr", 0, alb).pixels);
+  CHECK(errorOf([&] {
+          readImages(dir / "parts.exr", {rgb, {"ViewLayer.Nothing.R"}});
+        }).find("has no channel 'ViewLayer.Nothing.R'") != std::string::npos);
+}
+
 TEST_CASE("view layers: names with dots, --view-layer, and a line when ambiguous") {
   TempDir dir;
   // Blender 3.4 single-part: two view layers; the second's values differ.

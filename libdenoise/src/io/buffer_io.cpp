@@ -718,6 +718,22 @@ Image readImage(const std::string& path, int channels, const std::vector<std::st
   return readChannels(*in, table, path, wanted, dataWindowOf(table.partOf(wanted.front()).spec));
 }
 
+std::vector<Image> readImages(const std::string& path,
+                              const std::vector<std::vector<std::string>>& groups,
+                              const PixelWindow& window) {
+  if (groups.empty()) return {};
+  auto in = openInput(path);
+  ChannelTable table = scanChannels(*in, path);
+  for (const auto& group : groups) {
+    if (group.empty()) fail(path, "an empty channel group was asked for");
+    for (const auto& n : group)
+      if (!table.has(n)) fail(path, "has no channel '" + n + "'");
+  }
+  return readChannelGroups(
+      *in, table, path, groups,
+      window.empty() ? dataWindowOf(table.partOf(groups.front().front()).spec) : window);
+}
+
 namespace {
 
 std::string sizeText(const PixelWindow& w) {

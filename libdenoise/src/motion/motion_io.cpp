@@ -133,7 +133,10 @@ std::optional<MotionField> readMotion(const std::string& path, int width, int he
                     "motionBack/motionFore, or 2 to 4 plain channels)");
     return std::nullopt;
   }
-  const Image first = readImage(path, 0, found->channels);
+  std::vector<std::vector<std::string>> groups = {found->channels};
+  if (found->convention == Convention::BackFore) groups.push_back(found->channels2);
+  std::vector<Image> read = readImages(path, groups);
+  const Image& first = read.front();
   if (first.width != width || first.height != height)
     throw IoError(path + ": the motion is " + std::to_string(first.width) + "x" +
                   std::to_string(first.height) + " but the frame is " + std::to_string(width) +
@@ -149,7 +152,7 @@ std::optional<MotionField> readMotion(const std::string& path, int width, int he
       field = decodeForward(first);
       break;
     case Convention::BackFore:
-      field = decodeBackFore(first, readImage(path, 0, found->channels2));
+      field = decodeBackFore(first, read.back());
       break;
   }
   field.source = path + ": motion from " + describe(*found);

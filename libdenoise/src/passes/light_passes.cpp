@@ -206,8 +206,13 @@ LightPassLayout findLightPasses(const std::vector<std::string>& channelNames,
 LightPassImages readLightPasses(const std::string& path, const LightPassLayout& layout,
                                 const FrameBuffers& frame) {
   LightPassImages passes;
-  for (const auto& key : layout.usedKeys()) {
-    Image image = readImage(path, 3, layout.channels.at(key));
+  const std::vector<std::string> keys = layout.usedKeys();
+  std::vector<std::vector<std::string>> groups;
+  for (const auto& key : keys) groups.push_back(layout.channels.at(key));
+  std::vector<Image> images = readImages(path, groups, frame.dataWindow);  // one decoding
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const std::string& key = keys[k];
+    Image& image = images[k];
     if (image.width != frame.width || image.height != frame.height)
       throw IoError(path + ": pass " + layout.layerName(key) + " is " +
                     std::to_string(image.width) + "x" + std::to_string(image.height) +

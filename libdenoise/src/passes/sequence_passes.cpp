@@ -63,27 +63,37 @@ temporal::CompanionMaker lightPassCompanions(const OidnBase& base,
 Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius) {
   const LightPassLayout layout = findLightPasses(channelNames(path), layerPrefixOf(frame));
   const Image& color = frame.get("color");
+  // The view-dependent lights and their tints, read in one decoding of the file.
+  std::vector<std::pair<std::string, std::string>> lights;  // light, its tint ("": none)
+  std::map<std::string, std::size_t> index;                 // pass -> its image below
+  std::vector<std::vector<std::string>> groups;
+  auto want = [&](const std::string& key) {
+    if (key.empty() || index.count(key)) return;
+    index[key] = groups.size();
+    groups.push_back(layout.channels.at(key));
+  };
+  for (const LightPassTerm& term : layout.terms)
+    for (const std::string& key : term.lights)
+      if (const LightPassSpec* spec = layout.rule->find(key); spec && spec->viewDependent) {
+        lights.emplace_back(key, term.color);
+        want(key);
+        want(term.color);
+      }
+  if (lights.empty()) return Image();
+  const std::vector<Image> images = readImages(path, groups, frame.dataWindow);
+  for (const Image& image : images)  // readLightPasses names a wrong size, when asked for
+    if (!image.sameShape(color)) return Image();
   Image moving(color.width, color.height, 1), all(color.width, color.height, 1);
-  bool found = false;
-  for (const LightPassTerm& term : layout.terms) {
-    const Image tint =
-        term.color.empty() ? Image() : readImage(path, 3, layout.channels.at(term.color));
-    if (!tint.empty() && !tint.sameShape(color)) return Image();
-    for (const std::string& key : term.lights) {
-      const LightPassSpec* spec = layout.rule->find(key);
-      if (!spec || !spec->viewDependent) continue;
-      const Image light = readImage(path, 3, layout.channels.at(key));
-      if (!light.sameShape(color)) return Image();  // readLightPasses names it, when asked for
-      for (std::size_t i = 0; i < color.pixelCount(); ++i)
-        for (int c = 0; c < 3; ++c) {
-          const float v = finiteOr0(light.pixels[3 * i + c]) *
-                          (tint.empty() ? 1.0f : finiteOr0(tint.pixels[3 * i + c]));
-          moving.pixels[i] += std::max(v, 0.0f) / 3;
-        }
-      found = true;
-    }
+  for (const auto& [key, tintKey] : lights) {
+    const Image& light = images[index.at(key)];
+    const Image* tint = tintKey.empty() ? nullptr : &images[index.at(tintKey)];
+    for (std::size_t i = 0; i < color.pixelCount(); ++i)
+      for (int c = 0; c < 3; ++c) {
+        const float v =
+            finiteOr0(light.pixels[3 * i + c]) * (tint ? finiteOr0(tint->pixels[3 * i + c]) : 1.0f);
+        moving.pixels[i] += std::max(v, 0.0f) / 3;
+      }
   }
-  if (!found) return Image();
   for (std::size_t i = 0; i < color.pixelCount(); ++i)
     for (int c = 0; c < 3; ++c)
       all.pixels[i] += std::max(finiteOr0(color.pixels[3 * i + c]), 0.0f) / 3;

@@ -62,6 +62,14 @@ FrameBuffers readSeparateFiles(const std::map<std::string, std::string>& fileFor
 Image readImage(const std::string& path, int channels = 3,
                 const std::vector<std::string>& channelNames = {});
 
+// Groups of named channels, one image each, in one decoding of the file (a
+// multilayer EXR compresses every channel of a row block together, so each
+// readImage decodes the whole file again). Placed by pixel coordinates in
+// `window` (a frame's dataWindow); empty: the first channel's part's.
+std::vector<Image> readImages(const std::string& path,
+                              const std::vector<std::vector<std::string>>& groups,
+                              const PixelWindow& window = {});
+
 // Counts NaN/Inf values and replaces them by 0 (so metrics never silently average them).
 std::size_t countAndZeroNonFinite(Image& image);
 
