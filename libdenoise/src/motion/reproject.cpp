@@ -21,41 +21,54 @@ int nearest(float v, int size) {
   return i < 0 ? 0 : (i >= size ? size - 1 : i);
 }
 
+// A frame's guides and each pixel's normal length: the normal test compares
+// directions at every tap, so the lengths are taken once per plan.
+struct Surface {
+  const Guides& guides;
+  std::vector<float> normalLength;
+  explicit Surface(const Guides& g) : guides(g), normalLength(g.normal.pixelCount()) {
+    for (std::size_t i = 0; i < normalLength.size(); ++i) {
+      const float* n = &g.normal.pixels[3 * i];
+      normalLength[i] = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    }
+  }
+};
+
 // Whether pixel `s` of the source and pixel `c` of the current frame see the
 // same surface by depth, by normal, by albedo.
-bool sameDepth(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+bool sameDepth(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
                const TrustOptions& o) {
-  const float zs = source.depth.pixels[s], zc = current.depth.pixels[c];
+  const float zs = source.guides.depth.pixels[s], zc = current.guides.depth.pixels[c];
   return std::abs(zs - zc) <= o.depthRelative * std::max(std::abs(zc), 1e-6f);
 }
 
-bool sameNormal(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+bool sameNormal(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
                 const TrustOptions& o) {
-  const float* ns = &source.normal.pixels[3 * s];
-  const float* nc = &current.normal.pixels[3 * c];
-  const double ls = std::sqrt(ns[0] * ns[0] + ns[1] * ns[1] + ns[2] * ns[2]);
-  const double lc = std::sqrt(nc[0] * nc[0] + nc[1] * nc[1] + nc[2] * nc[2]);
+  const float* ns = &source.guides.normal.pixels[3 * s];
+  const float* nc = &current.guides.normal.pixels[3 * c];
+  const double ls = source.normalLength[s], lc = current.normalLength[c];
   if ((ls < 1e-3) != (lc < 1e-3)) return false;  // surface against background
   return ls < 1e-3 || (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]) >= o.normalCosine * ls * lc;
 }
 
-bool sameAlbedo(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+bool sameAlbedo(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
                 const TrustOptions& o) {
   for (int ch = 0; ch < 3; ++ch) {
-    const float as = source.albedo.pixels[3 * s + ch], ac = current.albedo.pixels[3 * c + ch];
+    const float as = source.guides.albedo.pixels[3 * s + ch];
+    const float ac = current.guides.albedo.pixels[3 * c + ch];
     if (std::abs(as - ac) > o.albedoAbsolute + o.albedoRelative * std::max(as, ac)) return false;
   }
   return true;
 }
 
-using GuideTest = bool (*)(const Guides&, std::size_t, const Guides&, std::size_t,
+using GuideTest = bool (*)(const Surface&, std::size_t, const Surface&, std::size_t,
                            const TrustOptions&);
 
 // A guide test passed at the current pixel or at a pixel within
 // `neighbourhood` of it. An edge pixel's guides blend two surfaces by a coverage that
 // every frame's anti-aliasing samples change, so the tap is compared with each
 // surface seen around it, not with this frame's blend alone.
-bool matchesAround(GuideTest test, const Guides& source, std::size_t s, const Guides& current,
+bool matchesAround(GuideTest test, const Surface& source, std::size_t s, const Surface& current,
                    std::size_t c, int width, int height, const TrustOptions& o) {
   if (test(source, s, current, c, o)) return true;
   const int r = o.neighbourhood, cx = static_cast<int>(c % width), cy = static_cast<int>(c / width);
@@ -69,16 +82,16 @@ bool matchesAround(GuideTest test, const Guides& source, std::size_t s, const Gu
 
 // Whether source pixel `s` shows a surface seen at or around current pixel
 // `c`, by every guide both frames have (albedo only when `byAlbedo`).
-bool sameSurface(const Guides& source, std::size_t s, const Guides& current, std::size_t c,
+bool sameSurface(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
                  int width, int height, const TrustOptions& o, bool byAlbedo = true) {
   auto has = [](const Image& a, const Image& b) { return !a.empty() && !b.empty(); };
-  if (has(source.depth, current.depth) &&
+  if (has(source.guides.depth, current.guides.depth) &&
       !matchesAround(sameDepth, source, s, current, c, width, height, o))
     return false;
-  if (has(source.normal, current.normal) &&
+  if (has(source.guides.normal, current.guides.normal) &&
       !matchesAround(sameNormal, source, s, current, c, width, height, o))
     return false;
-  return !byAlbedo || !has(source.albedo, current.albedo) ||
+  return !byAlbedo || !has(source.guides.albedo, current.guides.albedo) ||
          matchesAround(sameAlbedo, source, s, current, c, width, height, o);
 }
 
@@ -92,7 +105,7 @@ std::array<double, 4> catmullRom(double t) {
 // Whether Catmull-Rom may resample at (qx, qy): all 16 taps lie on the
 // screen and show the destination's surface by depth and normal (a texture's
 // edges within one surface are what it keeps sharp).
-bool cubicTapsMatch(const Guides& sourceGuides, float qx, float qy, const Guides& currentGuides,
+bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Surface& currentGuides,
                     std::size_t here, int width, int height, const TrustOptions& options) {
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
   if (x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
@@ -199,6 +212,7 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
   checkGuides(currentGuides, width, height);
   Resampling plan{positions, std::vector<unsigned char>(positions.pixelCount(), 0),
                   Image(width, height, 1)};
+  const Surface source(sourceGuides), current(currentGuides);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
       const std::size_t here = static_cast<std::size_t>(y) * width + x;
@@ -209,7 +223,7 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
       for (int t = 0; t < 4; ++t) {
         const Tap tap = bilinearTap(qx, qy, t, width, height);
         if (tap.weight <= 0.0 ||
-            !sameSurface(sourceGuides, tap.index, currentGuides, here, width, height, options))
+            !sameSurface(source, tap.index, current, here, width, height, options))
           continue;
         accepted += tap.weight;
         taps |= static_cast<unsigned char>(1u << t);
@@ -222,7 +236,7 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
       const float fy = qy - static_cast<int>(std::floor(qy));
       const bool whole = (fx == 0.0f || fx == 1.0f) && (fy == 0.0f || fy == 1.0f);
       if (options.cubic && !whole && accepted > 0.999 &&
-          cubicTapsMatch(sourceGuides, qx, qy, currentGuides, here, width, height, options))
+          cubicTapsMatch(source, qx, qy, current, here, width, height, options))
         taps |= kCubicTaps;
       plan.taps[here] = taps;
       plan.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));
