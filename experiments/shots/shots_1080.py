@@ -58,6 +58,7 @@ SHOTS = {
     "shelf_track":   (384, True),
     "still_lounge":  (1024, False),
     "still_studio":  (1024, False),
+    "lantern_shed":  (384, True),   # added to the tuning half later (SPLIT_1080.md)
 }
 
 
@@ -262,6 +263,27 @@ def torch_sweep():
     light("POINT", "hall", (2.5, 0.0, 2.2), 600.0, 0.1, colour=(0.6, 0.7, 1.0))  # a dim fill from a doorway
     camera((0.2, -1.2, 1.3), (-0.3, 3.0, 0.7), 35)
     return Vector((-0.2, 2.9, 0.6))
+
+
+def lantern_shed():
+    """A shed at night: a lantern's spot carried past a workbench with the toy
+    car and the helmet on it, against plank walls (a moving light indoors, its
+    pool crossing the frame and leaving it); a locked-off camera."""
+    world_colour((0.008, 0.01, 0.02), 1.0)
+    box("floor", (0, 1.5, -0.05), (6, 5, 0.1), material("concrete", (0.4, 0.4, 0.38), 0.7, "noise", 30.0))
+    box("planks", (0, 2.4, 1.3), (6, 0.15, 2.6), material("planks", (0.45, 0.3, 0.18), 0.6, "wood", 3.0))
+    box("bench", (0, 1.9, 0.45), (2.2, 0.7, 0.06), material("bench", (0.55, 0.42, 0.28), 0.5, "wood", 6.0))
+    box("bench_front", (0, 1.56, 0.22), (2.2, 0.04, 0.44), material("panel", (0.3, 0.3, 0.32), 0.8))
+    model("ToyCar", 0.5, (-0.35, 1.9, 0.48), 0.6)
+    model("DamagedHelmet", 0.35, (0.45, 2.0, 0.48), -0.4)
+    lantern = light("SPOT", "lantern", (-0.32, 0.4, 1.4), 1200.0, 0.05,
+                    (math.radians(65), 0, -0.22), (1.0, 0.85, 0.6))
+    lantern.data.spot_size = math.radians(28)
+    lantern.data.spot_blend = 0.7
+    drive(lantern, "location", 0, "-0.62 + 0.1 * frame")
+    light("POINT", "window", (-2.5, 0.5, 2.0), 300.0, 0.2, colour=(0.5, 0.6, 1.0))  # moonlight from a door
+    camera((0.1, -0.9, 1.2), (0.0, 2.0, 0.6), 40)
+    return Vector((0.0, 1.95, 0.6))
 
 
 def kitchen_dolly():
