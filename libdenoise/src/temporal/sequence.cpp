@@ -24,8 +24,8 @@ struct Sequence::Input {
   std::optional<Companions> companions;  // once made
   std::optional<DeviceFrame> onDevice;   // SequenceSettings::filterDevice: the frame there
 
-  // The frame's own denoisings are done: only its neighbours' filtering still
-  // reads it (53 MB less a 1080p frame behind the one being made).
+  // Once the frame is in the past its own denoisings are done (a frame denoised
+  // again, --repeats, keeps them): 53 MB less a 1080p frame.
   void dropCleanAux() { cleanAlbedo = cleanNormal = Image(); }
 };
 
@@ -222,7 +222,6 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
     if (!earlier.alone) continue;
     earlier.result.weights = FilterWeights();  // only the passes of the frames asked for use them
     denoisedHistory(m, read(fileOf(m)), earlier.result, denoise);
-    past->dropCleanAux();
   }
 }
 
@@ -292,6 +291,8 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   // The past frames' histories: made by the calls before, or here for the
   // first frames of a run (a shot split into runs gives the same bits).
   if (share > 0.0) makePastHistories(n, read, denoise);
+  for (auto& [number, past] : inputs_)
+    if (number < n) past->dropCleanAux();
   Filtered self = filtered(n, &frame, read, denoise);
   lastStats_ = self.result.stats;
   lastWithoutMotion_ = inputs_.at(n)->frame.motion.empty();
@@ -325,7 +326,6 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
     for (auto& [name, again] : companions.denoiseAccumulated(guides, passes.accumulated))
       passes.filtered.at(name) = blendWithHistory(passes.filtered.at(name), again, share);
   }
-  inputs_.at(n)->dropCleanAux();
   out.companions = std::move(passes.filtered);
   return out;
 }
