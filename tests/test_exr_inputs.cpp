@@ -227,15 +227,15 @@ TEST_CASE("a border render's data window is read and kept through to the output"
   }
 }
 
-TEST_CASE("multi-part files with parts of different sizes") {
-  TempDir dir;
+// A multi-part frame of 8x6: the colour, an albedo part cropped to its
+// non-empty pixels, a normal part reaching beyond the frame (OpenEXR gives
+// every part the same display window).
+void writeDifferentSizedParts(const std::string& path) {
   PartDesc combined{"ViewLayer.Combined",
                     layerChannels("ViewLayer.Combined", {"R", "G", "B", "A"}),
                     {0, 0, 8, 6},
                     {0, 0, 8, 6},
                     0};
-  // An albedo part cropped to its non-empty pixels, a normal part reaching
-  // beyond the frame (OpenEXR gives every part the same display window).
   PartDesc albedo{"ViewLayer.Denoising Albedo",
                   layerChannels("ViewLayer.Denoising Albedo"),
                   {2, 1, 4, 3},
@@ -246,7 +246,12 @@ TEST_CASE("multi-part files with parts of different sizes") {
                   {5, -2, 6, 4},
                   {0, 0, 8, 6},
                   2};
-  writeParts(dir / "parts.exr", {combined, albedo, normal});
+  writeParts(path, {combined, albedo, normal});
+}
+
+TEST_CASE("multi-part files with parts of different sizes") {
+  TempDir dir;
+  writeDifferentSizedParts(dir / "parts.exr");
 
   const FrameBuffers frame = readFrame(dir / "parts.exr");
   CHECK(frame.names() == std::vector<std::string>{"color", "albedo", "normal"});
@@ -277,17 +282,7 @@ TEST_CASE("multi-part files with parts of different sizes") {
 
 TEST_CASE("readImages: several channel groups in one reading, placed in the frame's window") {
   TempDir dir;
-  PartDesc combined{"ViewLayer.Combined",
-                    layerChannels("ViewLayer.Combined", {"R", "G", "B", "A"}),
-                    {0, 0, 8, 6},
-                    {0, 0, 8, 6},
-                    0};
-  PartDesc albedo{"ViewLayer.Denoising Albedo",
-                  layerChannels("ViewLayer.Denoising Albedo"),
-                  {2, 1, 4, 3},
-                  {0, 0, 8, 6},
-                  1};
-  writeParts(dir / "parts.exr", {combined, albedo});
+  writeDifferentSizedParts(dir / "parts.exr");
   const std::vector<std::string> rgb = layerChannels("ViewLayer.Combined", {"R", "G", "B"});
   const std::vector<std::string> alb = layerChannels("ViewLayer.Denoising Albedo");
   const FrameBuffers frame = readFrame(dir / "parts.exr");

@@ -26,12 +26,11 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from exrutil import read_channels, color_names  # noqa: E402
+from exrutil import read_color  # noqa: E402
 
 
 def rgb(path):
-    channels, _ = read_channels(path)
-    return np.stack([channels[c] for c in color_names(channels, path)], -1).astype(np.float64)
+    return read_color(path).astype(np.float64)
 
 
 def reinhard(x):
