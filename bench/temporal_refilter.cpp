@@ -4,7 +4,8 @@
 // code path as dndenoise (dn/temporal/sequence.h), with the "denoiser"
 // reading the frame's stored result.
 //   temporal_refilter NOISY.#.exr ALONE.#.exr -o OUT.#.exr [--window N]
-//                     [--colour LOW,HIGH] [--light-spread S] [--frames RANGE]
+//                     [--colour LOW,HIGH] [--light-spread S] [--drift BOX,THRESHOLD]
+//                     [--frames RANGE]
 //                     [--trust FILE] [--dump-trust DIR --target TARGET.#.exr]
 // --trust: a learned trust (LearnedTrust::toText) in place of the rules.
 // --dump-trust: per frame N, what the learned trust sees and the independent
@@ -78,6 +79,11 @@ int main(int argc, char** argv) {
         if (values.size() != 2) throw cli::UsageError("--colour LOW,HIGH");
         settings.filter.colourLow = cli::Args::toDouble("--colour", values[0]);
         settings.filter.colourHigh = cli::Args::toDouble("--colour", values[1]);
+      } else if (args.flag("--drift")) {
+        const auto values = cli::splitList(args.value("--drift"));
+        if (values.size() != 2) throw cli::UsageError("--drift BOX,THRESHOLD");
+        settings.filter.driftBox = static_cast<int>(cli::Args::toDouble("--drift", values[0]));
+        settings.filter.driftThreshold = cli::Args::toDouble("--drift", values[1]);
       } else if (args.flag("--light-spread")) {
         settings.filter.changedLightSpread = args.doubleValue("--light-spread", 0.0, 1e9);
       } else if (args.flag("--frames")) {

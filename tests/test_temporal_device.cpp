@@ -170,6 +170,7 @@ void checkSameFilter(const char* what, const Both& b) {
   CHECK(d.neighbours == c.neighbours);
   CHECK(d.repeatedNoise == c.repeatedNoise);
   CHECK(d.relit == c.relit);
+  CHECK(d.drifted == c.drifted);
   CHECK(d.changedLight == c.changedLight);
   REQUIRE(d.trusted.size() == c.trusted.size());
   for (std::size_t k = 0; k < c.trusted.size(); ++k)
@@ -180,6 +181,7 @@ void checkSameFilter(const char* what, const Both& b) {
     const NeighbourWeights &dk = b.onHost.weights.neighbours[k], &ck = b.cpu.weights.neighbours[k];
     CHECK(dk.frame == ck.frame);
     CHECK(dk.relit == ck.relit);
+    CHECK(dk.drifted == ck.drifted);
     CHECK(dk.resampling.taps == ck.resampling.taps);
     CHECK(maxDifference(dk.weight, ck.weight) < 1e-3);
   }
@@ -288,6 +290,34 @@ TEST_CASE("device filter: relit neighbours and a change of light agree") {
   CHECK(changed.onHost.stats.changedLight == 2);
   CHECK(changed.onHost.color.pixels == frames[1].denoised.pixels);
   CHECK(changed.onHost.history.pixels == frames[1].noisy.pixels);
+}
+
+TEST_CASE("device filter: a light drifting over part of the frame is brought in alike") {
+  std::vector<WindowFrame> frames = shot(5, 0.0f, 0, 0, 2000);
+  for (int t = 0; t < 5; ++t) {  // the top half 4 % dimmer a frame before the last
+    WindowFrame& f = frames[std::size_t(t)];
+    for (Image* image : {&f.denoised, &f.noisy})
+      for (int y = 0; y < image->height / 2; ++y)
+        for (int x = 0; x < image->width; ++x)
+          for (int c = 0; c < 3; ++c) image->at(x, y, c) *= 1.0f + 0.04f * float(t - 4);
+  }
+  TemporalOptions options;
+  options.driftBox = 3;
+  const Both drifted = filterBoth(windowOf(frames), 4, options);
+  CHECK(drifted.cpu.stats.drifted >= 2);
+  checkSameFilter("drifted", drifted);
+  std::vector<torch::Tensor> onDevice;
+  std::vector<const Image*> results;
+  for (const WindowFrame& f : frames) {
+    onDevice.push_back(pixelsToDevice(f.denoised, kCpu));
+    results.push_back(&f.denoised);
+  }
+  std::vector<const torch::Tensor*> onDeviceOf;
+  for (const torch::Tensor& t : onDevice) onDeviceOf.push_back(&t);
+  checkAgrees("drifted, filterWith",
+              pixelsToImage(filterWith(drifted.device.weights, onDeviceOf),
+                            frames[4].denoised.width, frames[4].denoised.height),
+              filterWith(drifted.cpu.weights, results));
 }
 
 TEST_CASE("device filter: a neighbour repeating the frame's noise is left out, as on the CPU") {

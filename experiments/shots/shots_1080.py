@@ -59,6 +59,7 @@ SHOTS = {
     "still_lounge":  (1024, False),
     "still_studio":  (1024, False),
     "lantern_shed":  (384, True),   # added to the tuning half later (SPLIT_1080.md)
+    "pendant_drift": (384, True),   # the same
 }
 
 
@@ -284,6 +285,30 @@ def lantern_shed():
     light("POINT", "window", (-2.5, 0.5, 2.0), 300.0, 0.2, colour=(0.5, 0.6, 1.0))  # moonlight from a door
     camera((0.1, -0.9, 1.2), (0.0, 2.0, 0.6), 40)
     return Vector((0.0, 1.95, 0.6))
+
+
+def pendant_drift():
+    """A reading corner at night: a pendant lamp's wide, soft pool drifting slowly
+    (a few centimetres a frame) over part of a sofa, a side table and a wall that
+    a doorway lights steadily (a moving light indoors, over part of the frame);
+    a locked-off camera."""
+    world_colour((0.01, 0.01, 0.02), 1.0)
+    box("floor", (0, 1.5, -0.05), (6, 5, 0.1), material("boards", (0.5, 0.36, 0.24), 0.45, "wood", 5.0))
+    box("wall", (0, 3.0, 1.4), (6, 0.2, 2.8), material("paper", (0.62, 0.6, 0.55), 0.9, "noise", 12.0))
+    box("rug", (0, 1.9, 0.005), (2.4, 1.6, 0.01), material("rug", (0.5, 0.15, 0.12), 0.95, "checker", 10.0))
+    model("GlamVelvetSofa", 1.8, (-0.2, 2.6, 0), 0.0)
+    box("side_table", (1.15, 2.3, 0.28), (0.45, 0.45, 0.56), material("walnut", (0.25, 0.15, 0.08), 0.35, "wood", 8.0))
+    model("GlassVaseFlowers", 0.35, (1.15, 2.3, 0.56), 0.3)
+    pendant = light("SPOT", "pendant", (0.3, 1.8, 2.4), 2500.0, 0.08, (0.0, 0.0, 0.0), (1.0, 0.88, 0.7))
+    pendant.data.spot_size = math.radians(80)
+    pendant.data.spot_blend = 1.0
+    drive(pendant, "rotation_euler", 1, "0.006 * frame - 0.02")  # the pool drifts sideways, slowly
+    downlight = light("SPOT", "downlight", (1.1, 2.2, 1.35), 600.0, 0.03, colour=(1.0, 0.8, 0.55))
+    downlight.data.spot_size = math.radians(40)  # steady, on the table and the vase only
+    downlight.data.spot_blend = 0.3
+    light("AREA", "doorway", (3.0, 1.0, 1.4), 60.0, 1.0, (0, math.radians(90), 0), (0.7, 0.75, 0.9))
+    camera((0.6, -1.2, 1.3), (0.3, 2.6, 0.6), 40)
+    return Vector((1.05, 2.3, 0.72))
 
 
 def kitchen_dolly():

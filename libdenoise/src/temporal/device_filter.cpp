@@ -502,6 +502,20 @@ Tensor relightFactor(const Tensor& moved, const Tensor& own, const Tensor& trust
   return torch::where(unlit.unsqueeze(0), torch::zeros_like(ratio), ratio);
 }
 
+// temporal_filter.cpp's: the wide boxes' ratio over the pixels `weight`
+// takes, where their light departs from 1 by more than `threshold`; else 1.
+Tensor driftFactor(const Tensor& moved, const Tensor& own, const Tensor& weight, int r,
+                   double threshold, const Grid& g) {
+  const Tensor taken = weight > 0;
+  const Tensor a = trustedBoxMean(own, taken, r, g), b = trustedBoxMean(moved, taken, r, g);
+  const Tensor ownLight = a.to(torch::kDouble).sum(0), movedLight = b.to(torch::kDouble).sum(0);
+  const Tensor drifted = (a[0] >= 0) & (movedLight > 0) &
+                         ((ownLight / movedLight.clamp_min(1e-300) - 1.0).abs() > threshold);
+  const Tensor ones = torch::ones_like(a);
+  const Tensor ratio = torch::where(b > 1e-6f, (a / b).clamp(0.5f, 2.0f), ones);
+  return torch::where(drifted.unsqueeze(0), ratio, ones);
+}
+
 // `weight` where relightFactor gave `factor` a ratio, 0 where it did not.
 Tensor relitWeight(const Tensor& weight, const Tensor& factor) {
   return torch::where(factor[0] == 0, torch::zeros_like(weight), weight);
@@ -535,6 +549,7 @@ struct Contribution {
   Tensor image, history, historyWeight;
   DeviceResampling resampling;
   Tensor relight, lightChange, weight;
+  bool drifted = false;  // `relight` by driftFactor, after the tests
   double spread = 0.0, fullSpread = 0.0;
   bool used() const { return weight.defined(); }
 };
@@ -688,6 +703,18 @@ Tensor weighAll(const LearnedTrust& trust, const Tensor& features) {
     at += n * m + m;
   }
   return torch::sigmoid(x.squeeze(1)).to(torch::kFloat);
+}
+
+// TemporalOptions::driftThreshold (applyDrift of temporal_filter.cpp).
+void applyDrift(Contribution& k, const Tensor& own, const TemporalOptions& options, const Grid& g) {
+  if (options.driftThreshold <= 0.0 || !k.used() || k.relight.defined()) return;
+  const Tensor factor =
+      driftFactor(k.image, own, k.weight, options.driftBox, options.driftThreshold, g);
+  if ((factor == 1.0f).all().item<bool>()) return;
+  k.image = k.image * factor;
+  if (k.history.defined()) k.history = k.history * factor;
+  k.relight = factor;
+  k.drifted = true;
 }
 
 void applyLearnedTrust(Contribution& k, const Tensor& features, const LearnedTrust& trust) {
@@ -854,9 +881,11 @@ FilterWeights DeviceFilterWeights::toHost() const {
   out.centre = centre;
   out.relightBox = relightBox;
   out.relightRange = relightRange;
+  out.driftBox = driftBox;
+  out.driftThreshold = driftThreshold;
   for (const DeviceNeighbourWeights& nb : neighbours)
-    out.neighbours.push_back(
-        {nb.frame, nb.resampling.toHost(width, height), nb.relit, toDoubles(nb.weight)});
+    out.neighbours.push_back({nb.frame, nb.resampling.toHost(width, height), nb.relit, nb.drifted,
+                              toDoubles(nb.weight)});
   return out;
 }
 
@@ -898,6 +927,7 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
                         c.grid);
   }
   if (options.observeTrust) observe(c, neighbours, contributions, features, options);
+  for (Contribution& k : contributions) applyDrift(k, current.denoised, options, c.grid);
 
   DeviceTemporalResult result;
   result.width = current.width, result.height = current.height;
@@ -908,6 +938,7 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
     result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
     result.stats.relit += k.verdict == Contribution::Verdict::Relit;
+    result.stats.drifted += k.drifted;
   }
   countTrusted(contributions, totalWeight, result.stats);
   if (options.accumulatedShare > 0.0) {
@@ -920,12 +951,15 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
   weights.centre = centre;
   weights.relightBox = options.relightBox;
   weights.relightRange = options.relightRange;
+  weights.driftBox = options.driftBox;
+  weights.driftThreshold = options.driftThreshold;
   weights.width = current.width, weights.height = current.height;
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& n = contributions[k];
     if (!n.used()) continue;
-    weights.neighbours.push_back(
-        {neighbours[k].index, std::move(n.resampling), n.relight.defined(), std::move(n.weight)});
+    weights.neighbours.push_back({neighbours[k].index, std::move(n.resampling),
+                                  n.relight.defined() && !n.drifted, n.drifted,
+                                  std::move(n.weight)});
   }
   return result;
 }
@@ -948,6 +982,8 @@ torch::Tensor filterWith(const DeviceFilterWeights& weights,
           relightFactor(in, own, nb.resampling.trust, weights.relightBox, weights.relightRange, g);
       in = in * factor;
       weight = relitWeight(weight, factor);
+    } else if (nb.drifted) {
+      in = in * driftFactor(in, own, nb.weight, weights.driftBox, weights.driftThreshold, g);
     }
     moved.push_back(in);
     used.push_back(stillPixels > 0.0 ? weight * stillness(nb.resampling.positions, stillPixels, g)

@@ -355,6 +355,7 @@ std::string Sequence::report() const {
   };
   add(", %d repeating its noise and left out", s.repeatedNoise);
   add(", %d brought to its light first", s.relit);
+  add(", %d brought to it where its light drifted", s.drifted);
   add(", %d with the light changed over the frame and left out", s.changedLight);
   std::string out = std::string(line) + ")";
   if (settings_.filter.accumulatedShare > 0.0 && s.accumulatedFrames > 1.0) {

@@ -240,6 +240,46 @@ std::vector<double> relitWeight(std::vector<double> weight, const Image& factor)
   return weight;
 }
 
+// The factor that brings a neighbour's result to the frame's light where its
+// light drifted: per pixel and channel, the ratio of the frame's and the
+// neighbour's results, each averaged over the (2r+1)^2 box of the pixels
+// `weight` takes (clamped to [1/2, 2]), where the boxes' light (the channels
+// summed) differs by more than `threshold` relative; 1 elsewhere.
+Image driftFactor(const Image& moved, const Image& own, const std::vector<double>& weight, int r,
+                  double threshold) {
+  const int w = own.width, h = own.height, channels = own.channels;
+  // Over the pixels taken: the frame's values, the neighbour's, then the count.
+  const BoxSums sums(w, h, 2 * channels + 1, [&](std::size_t i, double* v) {
+    if (weight[i] <= 0.0) return;
+    for (int c = 0; c < channels; ++c)
+      v[c] = own.pixels[i * channels + c], v[channels + c] = moved.pixels[i * channels + c];
+    v[2 * channels] = 1.0;
+  });
+  Image factor(w, h, channels, 1.0f);
+  std::vector<float> a(channels), b(channels);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const BoxSums::Box box = sums.box(x, y, r);
+      const double count = sums.sum(box, 2 * channels);
+      if (count <= 0.0) continue;  // nothing taken in the box
+      double ownLight = 0.0, movedLight = 0.0;
+      for (int c = 0; c < channels; ++c) {
+        a[c] = static_cast<float>(sums.sum(box, c) / count);
+        b[c] = static_cast<float>(sums.sum(box, channels + c) / count);
+        ownLight += a[c], movedLight += b[c];
+      }
+      if (!(movedLight > 0.0) || std::abs(ownLight / movedLight - 1.0) <= threshold) continue;
+      float* f = factor.pixel(x, y);
+      for (int c = 0; c < channels; ++c)
+        if (b[c] > 1e-6f) f[c] = std::clamp(a[c] / b[c], 0.5f, 2.0f);
+    }
+  return factor;
+}
+
+bool allOnes(const Image& image) {
+  return std::all_of(image.pixels.begin(), image.pixels.end(), [](float v) { return v == 1.0f; });
+}
+
 // The channels of `a`, then those of `b`, per pixel: reprojected in one call,
 // both are resampled from the same taps.
 Image stacked(const Image& a, const Image& b) {
@@ -316,7 +356,8 @@ struct Contribution {
   Image historyWeight;  // its weight per pixel relative to `image`'s: stillness
   // Where each pixel of the frame is in the neighbour, and the taps its images are brought in by.
   motion::Resampling resampling;
-  Image relight;  // relit: the factor its result was brought to the frame's light by
+  Image relight;  // relit or drifted: the factor its result was brought to the frame's light by
+  bool drifted = false;            // by driftFactor, after the tests
   std::vector<float> lightChange;  // the renders' test per pixel (standard errors); empty if relit
   std::vector<double> weight;
   double spread = 0.0;      // of its differences from the frame's result, in local noise levels
@@ -542,6 +583,18 @@ void applyViewDependence(Contribution& k, const Image& share, double pixels) {
   }
 }
 
+// TemporalOptions::driftThreshold: a kept neighbour's result (and history)
+// brought to the frame's light where its light drifted.
+void applyDrift(Contribution& k, const Image& own, const TemporalOptions& options) {
+  if (options.driftThreshold <= 0.0 || k.weight.empty() || !k.relight.empty()) return;
+  Image factor = driftFactor(k.image, own, k.weight, options.driftBox, options.driftThreshold);
+  if (allOnes(factor)) return;
+  k.image = scaled(std::move(k.image), factor);
+  if (!k.history.empty()) k.history = scaled(std::move(k.history), factor);
+  k.relight = std::move(factor);
+  k.drifted = true;
+}
+
 void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
                        const LearnedTrust& trust) {
   for (std::size_t i = 0; i < k.weight.size(); ++i) {
@@ -577,7 +630,7 @@ void forEach(std::size_t count, int threads, const std::function<void(std::size_
 // The frame's noisy render and its neighbours', each neighbour's brought in
 // at the nearest pixel (resampling would correlate the noise, which the
 // network then leaves as blotches) with the weights its result got, and a
-// relit one brought to the frame's light by its result's factor. Also the
+// relit or drifted one brought to the frame's light by its result's factor. Also the
 // effective number of frames per pixel, (sum w)^2 / sum w^2: the accumulated
 // render's variance is the frame's over that.
 void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowFrame*>& frames,
@@ -634,11 +687,13 @@ FilterWeights weightsOf(std::vector<Contribution> contributions,
   out.centre = centre;
   out.relightBox = options.relightBox;
   out.relightRange = options.relightRange;
+  out.driftBox = options.driftBox;
+  out.driftThreshold = options.driftThreshold;
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
-    out.neighbours.push_back(
-        {indices[k], std::move(c.resampling), !c.relight.empty(), std::move(c.weight)});
+    out.neighbours.push_back({indices[k], std::move(c.resampling), !c.relight.empty() && !c.drifted,
+                              c.drifted, std::move(c.weight)});
   }
   return out;
 }
@@ -708,6 +763,8 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     }
     options.observeTrust(samples);
   }
+  forEach(contributions.size(), options.threads,
+          [&](std::size_t n) { applyDrift(contributions[n], current.denoised, options); });
 
   const WeightedMean mean = weightedMean(current.denoised, contributions);
   TemporalResult result;
@@ -717,6 +774,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
     result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
     result.stats.relit += k.verdict == Contribution::Verdict::Relit;
+    result.stats.drifted += k.drifted;
     const auto used =
         std::count_if(k.weight.begin(), k.weight.end(), [](double w) { return w > 0.0; });
     result.stats.trusted.push_back(double(used) / mean.weight.size());
@@ -773,14 +831,20 @@ Image combineOver(const char* caller, const FilterWeights& weights,
     }
     Image in = nearest ? motion::reprojectNearest(*image, nb.resampling.positions)
                        : motion::resample(nb.resampling, *image);
-    if (nb.relit) {
+    if (nb.relit || nb.drifted) {
       // This image's own factor: its light changed by its own ratio.
-      const Image factor =
-          relightFactor(!nearest && image == light ? in : motion::resample(nb.resampling, *light),
-                        *ownLight, nb.resampling.trust, weights.relightBox, weights.relightRange);
-      in = scaled(std::move(in), factor);
-      gated.push_back(relitWeight(*weight, factor));
-      weight = &gated.back();
+      const Image lightIn =
+          !nearest && image == light ? in : motion::resample(nb.resampling, *light);
+      if (nb.drifted) {
+        in = scaled(std::move(in), driftFactor(lightIn, *ownLight, nb.weight, weights.driftBox,
+                                               weights.driftThreshold));
+      } else {
+        const Image factor = relightFactor(lightIn, *ownLight, nb.resampling.trust,
+                                           weights.relightBox, weights.relightRange);
+        in = scaled(std::move(in), factor);
+        gated.push_back(relitWeight(*weight, factor));
+        weight = &gated.back();
+      }
     }
     moved.push_back(std::move(in));
     others.push_back({&moved.back(), weight});

@@ -57,6 +57,7 @@ struct DeviceNeighbourWeights {
   std::size_t frame = 0;  // its index in the window
   DeviceResampling resampling;
   bool relit = false;
+  bool drifted = false;
   torch::Tensor weight;  // float per pixel, after every test
 };
 
@@ -66,6 +67,8 @@ struct DeviceFilterWeights {
   std::size_t centre = 0;
   int relightBox = 1;
   double relightRange = 10.0;
+  int driftBox = 31;
+  double driftThreshold = 0.0;
   int width = 0, height = 0;
   std::vector<DeviceNeighbourWeights> neighbours;
   bool empty() const { return neighbours.empty(); }

@@ -94,6 +94,17 @@ struct TemporalOptions {
   // torch lost 4 dB in its direct-light pass). 10 (the clamp before) and 4
   // chose alike on the tuning half; 2 lost 0.01 dB.
   double relightRange = 10.0;
+  // A light drifting slowly over part of the frame (a lamp's pool edging
+  // across a wall) changes a pixel too little between frames for the tests
+  // above at a few samples, yet a neighbour taken where it passes them
+  // carries its older light into the frame. After the tests, each neighbour
+  // not relit is brought to the frame's light wherever its taken pixels'
+  // mean over the (2 driftBox + 1)^2 box around differs from the frame's by
+  // more than driftThreshold (relative, the channels summed): scaled by the
+  // boxes' ratio per channel (clamped to [1/2, 2]), its weights unchanged.
+  // 0: off.
+  int driftBox = 31;
+  double driftThreshold = 0.05;
   // The noisy renders themselves, averaged over (2 lightBox + 1)^2 pixels,
   // must agree within their standard error: the weight falls from 1 at
   // lightLow standard errors to 0 at lightHigh (a change of light).
@@ -137,6 +148,7 @@ struct TemporalStats {
   int neighbours = 0;              // neighbours available in the window
   int repeatedNoise = 0;           // of them, rejected for repeating the frame's noise
   int relit = 0;                   // of them, brought to the frame's light first
+  int drifted = 0;                 // of them, brought to it where its light drifted
   int changedLight = 0;            // of them, rejected for a change of light over the frame
   std::vector<double> trusted;     // per neighbour: share of pixels it contributed to
   double accumulatedFrames = 1.0;  // mean over pixels of the frames in the accumulated render
@@ -162,6 +174,9 @@ struct NeighbourWeights {
   // Brought to the frame's light first (a lamp moved): each image by its own
   // factor, the ratio of its box means over the trusted pixels.
   bool relit = false;
+  // Brought to it where its light drifted (TemporalOptions::driftThreshold):
+  // each image by its own wide boxes' ratio, where that departs from 1.
+  bool drifted = false;
   std::vector<double> weight;  // per pixel, after every test; the frame's own weighs 1
 };
 
@@ -169,6 +184,8 @@ struct FilterWeights {
   std::size_t centre = 0;
   int relightBox = 1;
   double relightRange = 10.0;
+  int driftBox = 31;
+  double driftThreshold = 0.0;
   std::vector<NeighbourWeights> neighbours;  // those it used, in the order of its sums
   bool empty() const { return neighbours.empty(); }
 };
