@@ -61,13 +61,12 @@ bool sameAlbedo(const Surface& source, std::size_t s, const Surface& current, st
   return true;
 }
 
-using GuideTest = bool (*)(const Surface&, std::size_t, const Surface&, std::size_t,
-                           const TrustOptions&);
-
 // A guide test passed at the current pixel or at a pixel within
 // `neighbourhood` of it. An edge pixel's guides blend two surfaces by a coverage that
 // every frame's anti-aliasing samples change, so the tap is compared with each
-// surface seen around it, not with this frame's blend alone.
+// surface seen around it, not with this frame's blend alone. (A template, so
+// that the test is inlined: this runs for every tap of every pixel.)
+template <class GuideTest>
 bool matchesAround(GuideTest test, const Surface& source, std::size_t s, const Surface& current,
                    std::size_t c, int width, int height, const TrustOptions& o) {
   if (test(source, s, current, c, o)) return true;
@@ -104,13 +103,18 @@ std::array<double, 4> catmullRom(double t) {
 
 // Whether Catmull-Rom may resample at (qx, qy): all 16 taps lie on the
 // screen and show the destination's surface by depth and normal (a texture's
-// edges within one surface are what it keeps sharp).
+// edges within one surface are what it keeps sharp). The bilinear taps in
+// `matched` (Resampling::taps' bits) passed those tests already.
 bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Surface& currentGuides,
-                    std::size_t here, int width, int height, const TrustOptions& options) {
+                    std::size_t here, int width, int height, const TrustOptions& options,
+                    unsigned char matched) {
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
   if (x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
   for (int j = 0; j < 4; ++j)
     for (int i = 0; i < 4; ++i) {
+      // The middle four are the bilinear taps: those `matched` passed already.
+      const bool middle = (i == 1 || i == 2) && (j == 1 || j == 2);
+      if (middle && (matched & (1u << ((i - 1) + 2 * (j - 1))))) continue;
       const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
       if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options, false))
         return false;
@@ -236,7 +240,7 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
       const float fy = qy - static_cast<int>(std::floor(qy));
       const bool whole = (fx == 0.0f || fx == 1.0f) && (fy == 0.0f || fy == 1.0f);
       if (options.cubic && !whole && accepted > 0.999 &&
-          cubicTapsMatch(source, qx, qy, current, here, width, height, options))
+          cubicTapsMatch(source, qx, qy, current, here, width, height, options, taps))
         taps |= kCubicTaps;
       plan.taps[here] = taps;
       plan.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));

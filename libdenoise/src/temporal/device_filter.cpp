@@ -503,14 +503,20 @@ Tensor relightFactor(const Tensor& moved, const Tensor& own, const Tensor& trust
 }
 
 // temporal_filter.cpp's: the wide boxes' ratio over the pixels `weight`
-// takes, where their light departs from 1 by more than `threshold`; else 1.
+// takes, where their light departs from 1 by more than `threshold`, or, given
+// `where` (bool per pixel), at its pixels; else 1.
 Tensor driftFactor(const Tensor& moved, const Tensor& own, const Tensor& weight, int r,
-                   double threshold, const Grid& g) {
+                   double threshold, const Grid& g, const Tensor& where = {}) {
   const Tensor taken = weight > 0;
   const Tensor a = trustedBoxMean(own, taken, r, g), b = trustedBoxMean(moved, taken, r, g);
-  const Tensor ownLight = a.to(torch::kDouble).sum(0), movedLight = b.to(torch::kDouble).sum(0);
-  const Tensor drifted = (a[0] >= 0) & (movedLight > 0) &
-                         ((ownLight / movedLight.clamp_min(1e-300) - 1.0).abs() > threshold);
+  Tensor drifted = a[0] >= 0;
+  if (where.defined()) {
+    drifted = drifted & where;
+  } else {
+    const Tensor ownLight = a.to(torch::kDouble).sum(0), movedLight = b.to(torch::kDouble).sum(0);
+    drifted = drifted & (movedLight > 0) &
+              ((ownLight / movedLight.clamp_min(1e-300) - 1.0).abs() > threshold);
+  }
   const Tensor ones = torch::ones_like(a);
   const Tensor ratio = torch::where(b > 1e-6f, (a / b).clamp(0.5f, 2.0f), ones);
   return torch::where(drifted.unsqueeze(0), ratio, ones);
@@ -549,7 +555,7 @@ struct Contribution {
   Tensor image, history, historyWeight;
   DeviceResampling resampling;
   Tensor relight, lightChange, weight;
-  bool drifted = false;  // `relight` by driftFactor, after the tests
+  Tensor drifted;  // bool per pixel: where driftFactor changed `relight`, after the tests
   double spread = 0.0, fullSpread = 0.0;
   bool used() const { return weight.defined(); }
 };
@@ -710,11 +716,12 @@ void applyDrift(Contribution& k, const Tensor& own, const TemporalOptions& optio
   if (options.driftThreshold <= 0.0 || !k.used() || k.relight.defined()) return;
   const Tensor factor =
       driftFactor(k.image, own, k.weight, options.driftBox, options.driftThreshold, g);
-  if ((factor == 1.0f).all().item<bool>()) return;
+  const Tensor drifted = (factor != 1.0f).any(0);
+  if (!drifted.any().item<bool>()) return;
   k.image = k.image * factor;
   if (k.history.defined()) k.history = k.history * factor;
   k.relight = factor;
-  k.drifted = true;
+  k.drifted = drifted;
 }
 
 void applyLearnedTrust(Contribution& k, const Tensor& features, const LearnedTrust& trust) {
@@ -882,10 +889,16 @@ FilterWeights DeviceFilterWeights::toHost() const {
   out.relightBox = relightBox;
   out.relightRange = relightRange;
   out.driftBox = driftBox;
-  out.driftThreshold = driftThreshold;
-  for (const DeviceNeighbourWeights& nb : neighbours)
-    out.neighbours.push_back({nb.frame, nb.resampling.toHost(width, height), nb.relit, nb.drifted,
-                              toDoubles(nb.weight)});
+  for (const DeviceNeighbourWeights& nb : neighbours) {
+    std::vector<unsigned char> drifted;
+    if (nb.drifted.defined()) {
+      const Tensor bytes = nb.drifted.to(torch::kUInt8).contiguous().cpu();
+      drifted.assign(bytes.data_ptr<std::uint8_t>(),
+                     bytes.data_ptr<std::uint8_t>() + bytes.numel());
+    }
+    out.neighbours.push_back({nb.frame, nb.resampling.toHost(width, height), nb.relit,
+                              std::move(drifted), toDoubles(nb.weight)});
+  }
   return out;
 }
 
@@ -938,7 +951,7 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
     result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
     result.stats.relit += k.verdict == Contribution::Verdict::Relit;
-    result.stats.drifted += k.drifted;
+    result.stats.drifted += k.drifted.defined();
   }
   countTrusted(contributions, totalWeight, result.stats);
   if (options.accumulatedShare > 0.0) {
@@ -952,13 +965,12 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
   weights.relightBox = options.relightBox;
   weights.relightRange = options.relightRange;
   weights.driftBox = options.driftBox;
-  weights.driftThreshold = options.driftThreshold;
   weights.width = current.width, weights.height = current.height;
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& n = contributions[k];
     if (!n.used()) continue;
     weights.neighbours.push_back({neighbours[k].index, std::move(n.resampling),
-                                  n.relight.defined() && !n.drifted, n.drifted,
+                                  n.relight.defined() && !n.drifted.defined(), n.drifted,
                                   std::move(n.weight)});
   }
   return result;
@@ -982,8 +994,8 @@ torch::Tensor filterWith(const DeviceFilterWeights& weights,
           relightFactor(in, own, nb.resampling.trust, weights.relightBox, weights.relightRange, g);
       in = in * factor;
       weight = relitWeight(weight, factor);
-    } else if (nb.drifted) {
-      in = in * driftFactor(in, own, nb.weight, weights.driftBox, weights.driftThreshold, g);
+    } else if (nb.drifted.defined()) {
+      in = in * driftFactor(in, own, nb.weight, weights.driftBox, 0.0, g, nb.drifted);
     }
     moved.push_back(in);
     used.push_back(stillPixels > 0.0 ? weight * stillness(nb.resampling.positions, stillPixels, g)

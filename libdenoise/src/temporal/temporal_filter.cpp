@@ -240,13 +240,14 @@ std::vector<double> relitWeight(std::vector<double> weight, const Image& factor)
   return weight;
 }
 
-// The factor that brings a neighbour's result to the frame's light where its
+// The factor that brings a neighbour's image to the frame's light where its
 // light drifted: per pixel and channel, the ratio of the frame's and the
-// neighbour's results, each averaged over the (2r+1)^2 box of the pixels
+// neighbour's images, each averaged over the (2r+1)^2 box of the pixels
 // `weight` takes (clamped to [1/2, 2]), where the boxes' light (the channels
-// summed) differs by more than `threshold` relative; 1 elsewhere.
+// summed) differs by more than `threshold` relative, or, given `where`, at
+// its pixels (the colour's decision, for its light passes); 1 elsewhere.
 Image driftFactor(const Image& moved, const Image& own, const std::vector<double>& weight, int r,
-                  double threshold) {
+                  double threshold, const std::vector<unsigned char>* where = nullptr) {
   const int w = own.width, h = own.height, channels = own.channels;
   // Over the pixels taken: the frame's values, the neighbour's, then the count.
   const BoxSums sums(w, h, 2 * channels + 1, [&](std::size_t i, double* v) {
@@ -259,6 +260,7 @@ Image driftFactor(const Image& moved, const Image& own, const std::vector<double
   std::vector<float> a(channels), b(channels);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
+      if (where && !(*where)[static_cast<std::size_t>(y) * w + x]) continue;
       const BoxSums::Box box = sums.box(x, y, r);
       const double count = sums.sum(box, 2 * channels);
       if (count <= 0.0) continue;  // nothing taken in the box
@@ -268,7 +270,8 @@ Image driftFactor(const Image& moved, const Image& own, const std::vector<double
         b[c] = static_cast<float>(sums.sum(box, channels + c) / count);
         ownLight += a[c], movedLight += b[c];
       }
-      if (!(movedLight > 0.0) || std::abs(ownLight / movedLight - 1.0) <= threshold) continue;
+      if (!where && (!(movedLight > 0.0) || std::abs(ownLight / movedLight - 1.0) <= threshold))
+        continue;
       float* f = factor.pixel(x, y);
       for (int c = 0; c < channels; ++c)
         if (b[c] > 1e-6f) f[c] = std::clamp(a[c] / b[c], 0.5f, 2.0f);
@@ -276,8 +279,13 @@ Image driftFactor(const Image& moved, const Image& own, const std::vector<double
   return factor;
 }
 
-bool allOnes(const Image& image) {
-  return std::all_of(image.pixels.begin(), image.pixels.end(), [](float v) { return v == 1.0f; });
+// Per pixel, 1 where `factor` changes any channel.
+std::vector<unsigned char> changedPixels(const Image& factor) {
+  std::vector<unsigned char> out(factor.pixelCount(), 0);
+  for (std::size_t i = 0; i < out.size(); ++i)
+    for (int c = 0; c < factor.channels; ++c)
+      if (factor.pixels[i * factor.channels + c] != 1.0f) out[i] = 1;
+  return out;
 }
 
 // The channels of `a`, then those of `b`, per pixel: reprojected in one call,
@@ -357,7 +365,8 @@ struct Contribution {
   // Where each pixel of the frame is in the neighbour, and the taps its images are brought in by.
   motion::Resampling resampling;
   Image relight;  // relit or drifted: the factor its result was brought to the frame's light by
-  bool drifted = false;            // by driftFactor, after the tests
+  std::vector<unsigned char>
+      drifted;                     // where driftFactor changed it, after the tests; empty: nowhere
   std::vector<float> lightChange;  // the renders' test per pixel (standard errors); empty if relit
   std::vector<double> weight;
   double spread = 0.0;      // of its differences from the frame's result, in local noise levels
@@ -588,11 +597,12 @@ void applyViewDependence(Contribution& k, const Image& share, double pixels) {
 void applyDrift(Contribution& k, const Image& own, const TemporalOptions& options) {
   if (options.driftThreshold <= 0.0 || k.weight.empty() || !k.relight.empty()) return;
   Image factor = driftFactor(k.image, own, k.weight, options.driftBox, options.driftThreshold);
-  if (allOnes(factor)) return;
+  std::vector<unsigned char> drifted = changedPixels(factor);
+  if (std::none_of(drifted.begin(), drifted.end(), [](unsigned char d) { return d; })) return;
   k.image = scaled(std::move(k.image), factor);
   if (!k.history.empty()) k.history = scaled(std::move(k.history), factor);
   k.relight = std::move(factor);
-  k.drifted = true;
+  k.drifted = std::move(drifted);
 }
 
 void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
@@ -688,12 +698,12 @@ FilterWeights weightsOf(std::vector<Contribution> contributions,
   out.relightBox = options.relightBox;
   out.relightRange = options.relightRange;
   out.driftBox = options.driftBox;
-  out.driftThreshold = options.driftThreshold;
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
-    out.neighbours.push_back({indices[k], std::move(c.resampling), !c.relight.empty() && !c.drifted,
-                              c.drifted, std::move(c.weight)});
+    const bool relit = !c.relight.empty() && c.drifted.empty();
+    out.neighbours.push_back(
+        {indices[k], std::move(c.resampling), relit, std::move(c.drifted), std::move(c.weight)});
   }
   return out;
 }
@@ -774,7 +784,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
     result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
     result.stats.relit += k.verdict == Contribution::Verdict::Relit;
-    result.stats.drifted += k.drifted;
+    result.stats.drifted += !k.drifted.empty();
     const auto used =
         std::count_if(k.weight.begin(), k.weight.end(), [](double w) { return w > 0.0; });
     result.stats.trusted.push_back(double(used) / mean.weight.size());
@@ -831,13 +841,13 @@ Image combineOver(const char* caller, const FilterWeights& weights,
     }
     Image in = nearest ? motion::reprojectNearest(*image, nb.resampling.positions)
                        : motion::resample(nb.resampling, *image);
-    if (nb.relit || nb.drifted) {
+    if (nb.relit || !nb.drifted.empty()) {
       // This image's own factor: its light changed by its own ratio.
       const Image lightIn =
           !nearest && image == light ? in : motion::resample(nb.resampling, *light);
-      if (nb.drifted) {
-        in = scaled(std::move(in), driftFactor(lightIn, *ownLight, nb.weight, weights.driftBox,
-                                               weights.driftThreshold));
+      if (!nb.drifted.empty()) {
+        in = scaled(std::move(in),
+                    driftFactor(lightIn, *ownLight, nb.weight, weights.driftBox, 0.0, &nb.drifted));
       } else {
         const Image factor = relightFactor(lightIn, *ownLight, nb.resampling.trust,
                                            weights.relightBox, weights.relightRange);

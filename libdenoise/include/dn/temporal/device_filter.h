@@ -57,8 +57,8 @@ struct DeviceNeighbourWeights {
   std::size_t frame = 0;  // its index in the window
   DeviceResampling resampling;
   bool relit = false;
-  bool drifted = false;
-  torch::Tensor weight;  // float per pixel, after every test
+  torch::Tensor drifted;  // bool per pixel (NeighbourWeights::drifted); undefined: nowhere
+  torch::Tensor weight;   // float per pixel, after every test
 };
 
 // FilterWeights on the device: filterWith on tensors, or toHost for the
@@ -68,7 +68,6 @@ struct DeviceFilterWeights {
   int relightBox = 1;
   double relightRange = 10.0;
   int driftBox = 31;
-  double driftThreshold = 0.0;
   int width = 0, height = 0;
   std::vector<DeviceNeighbourWeights> neighbours;
   bool empty() const { return neighbours.empty(); }

@@ -174,9 +174,10 @@ struct NeighbourWeights {
   // Brought to the frame's light first (a lamp moved): each image by its own
   // factor, the ratio of its box means over the trusted pixels.
   bool relit = false;
-  // Brought to it where its light drifted (TemporalOptions::driftThreshold):
-  // each image by its own wide boxes' ratio, where that departs from 1.
-  bool drifted = false;
+  // Per pixel, 1 where the colour was brought to it for a light that drifted
+  // (TemporalOptions::driftThreshold): there each image by its own wide
+  // boxes' ratio. Empty: nowhere.
+  std::vector<unsigned char> drifted;
   std::vector<double> weight;  // per pixel, after every test; the frame's own weighs 1
 };
 
@@ -185,7 +186,6 @@ struct FilterWeights {
   int relightBox = 1;
   double relightRange = 10.0;
   int driftBox = 31;
-  double driftThreshold = 0.0;
   std::vector<NeighbourWeights> neighbours;  // those it used, in the order of its sums
   bool empty() const { return neighbours.empty(); }
 };
