@@ -364,9 +364,9 @@ struct Contribution {
   Image historyWeight;  // its weight per pixel relative to `image`'s: stillness
   // Where each pixel of the frame is in the neighbour, and the taps its images are brought in by.
   motion::Resampling resampling;
-  Image relight;  // relit or drifted: the factor its result was brought to the frame's light by
-  std::vector<unsigned char>
-      drifted;                     // where driftFactor changed it, after the tests; empty: nowhere
+  // Relit or drifted: the factor its result was brought to the frame's light by.
+  Image relight;
+  std::vector<unsigned char> drifted;  // drifted: where that factor changed it; else empty
   std::vector<float> lightChange;  // the renders' test per pixel (standard errors); empty if relit
   std::vector<double> weight;
   double spread = 0.0;      // of its differences from the frame's result, in local noise levels
