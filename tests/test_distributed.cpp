@@ -149,7 +149,8 @@ TrainBatch fixedTrainBatch() {
 //   gradients  start from rank-specific weights, take rank 0's by broadcast,
 //              average the gradients of this rank's half of the batch, save them
 //   trainer    two Trainer steps on this rank's half of the batch, save the weights
-//   quit       stop right after joining
+//   quit       stop right after joining and one barrier (so that rank 0's
+//              side of the connection is made before this rank closes it)
 TEST_CASE("two-process worker" * doctest::skip()) {
   const char* spec = std::getenv(kWorkerEnv);
   REQUIRE(spec != nullptr);
@@ -188,6 +189,7 @@ TEST_CASE("two-process worker" * doctest::skip()) {
     torch::save(saved, output);
   } else {
     REQUIRE(std::string(mode) == "quit");
+    averager->barrier();
   }
 }
 
@@ -287,6 +289,7 @@ TEST_CASE("a rank that stops makes the next collective an error, not a hang") {
   const int port = freePort();
   const pid_t rank1 = spawnWorker(1, 2, port, "quit", "-");
   GradientAverager averager(localOptions(0, 2, port));
+  averager.barrier();  // both joined; then rank 1 stops
   REQUIRE(waitForWorker(rank1, std::chrono::seconds(60)) == 0);
   auto net = tinyNet(3);
   gradients(net, 0, kBatch);
