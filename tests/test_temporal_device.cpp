@@ -181,7 +181,12 @@ void checkSameFilter(const char* what, const Both& b) {
     const NeighbourWeights &dk = b.onHost.weights.neighbours[k], &ck = b.cpu.weights.neighbours[k];
     CHECK(dk.frame == ck.frame);
     CHECK(dk.relit == ck.relit);
-    CHECK(dk.drifted == ck.drifted);
+    // Where the drift rule scaled it: a pixel at the threshold may differ by
+    // rounding (on CUDA), as the trusted shares may.
+    REQUIRE(dk.drifted.size() == ck.drifted.size());
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < ck.drifted.size(); ++i) differ += dk.drifted[i] != ck.drifted[i];
+    CHECK(differ <= ck.drifted.size() / 500);
     CHECK(dk.resampling.taps == ck.resampling.taps);
     CHECK(maxDifference(dk.weight, ck.weight) < 1e-3);
   }
