@@ -25,7 +25,7 @@ struct Sequence::Input {
   std::optional<DeviceFrame> onDevice;   // SequenceSettings::filterDevice: the frame there
 
   // Once the frame is in the past its own denoisings are done (a frame denoised
-  // again, --repeats, keeps them): 53 MB less a 1080p frame.
+  // again with -n keeps them): 53 MB less a 1080p frame.
   void dropCleanAux() { cleanAlbedo = cleanNormal = Image(); }
 };
 
