@@ -81,8 +81,9 @@ int run(Options o, int argc, char** argv) {
   const auto sequence = planSequence(o, jobs, denoiser);
   // On a sequence the light passes are filtered with the beauty's weights.
   const bool passesOverTime = sequence && o.passes && o.passesOverTime != PassesOverTime::Off;
-  const temporal::Sequence::Read readFile = [&](const std::string& path) {
-    return readInput(o, denoiser, path, path);
+  const temporal::Sequence::Read readFile = [&](const std::string& path,
+                                                const ChannelGroups& extra) {
+    return readInput(o, denoiser, path, path, extra);
   };
 
   int status = cli::kExitOk;

@@ -69,6 +69,9 @@ int main(int argc, char** argv) {
     settings.viewDependentShare = [](const std::string& path, const FrameBuffers& frame) {
       return viewDependentShare(path, frame);
     };
+    settings.viewDependentChannels = [](const std::string& path, const std::string& prefix) {
+      return viewDependentChannels(path, prefix);
+    };
     while (!args.done()) {
       if (args.flag("-o")) {
         output = args.value("-o");
@@ -121,9 +124,10 @@ int main(int argc, char** argv) {
     std::string why;
     auto sequence = temporal::Sequence::plan(noisy, inputs, settings, why);
     if (!sequence) throw IoError(noisy + ": " + (why.empty() ? "not a sequence" : why));
-    const temporal::Sequence::Read read = [](const std::string& path) {
+    const temporal::Sequence::Read read = [](const std::string& path, const ChannelGroups& extra) {
       ReadOptions only;
       only.only = {"color"};
+      only.extra = extra;
       return readFrame(path, only);
     };
     const temporal::Sequence::Denoise stored = [&](const std::string& path, const FrameBuffers&) {
@@ -133,7 +137,7 @@ int main(int argc, char** argv) {
     };
     for (std::size_t i = 0; i < inputs.size(); ++i) {
       dumpNumber = numbers[i];
-      const DenoiseResult result = sequence->denoise(inputs[i], read(inputs[i]), read, stored);
+      const DenoiseResult result = sequence->denoise(inputs[i], read(inputs[i], {}), read, stored);
       writeImage(frameFile(output, numbers[i]), result.color, false, {"R", "G", "B"});
       fmt::print(stderr, "temporal_refilter: {}: {}\n", inputs[i], sequence->report());
     }

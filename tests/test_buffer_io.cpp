@@ -253,7 +253,7 @@ TEST_CASE("bad input gives one line naming the file") {
   CHECK(noColor.find("no colour channels") != std::string::npos);
 
   auto absent = errorOf([&] {
-    readFrame(dir / "full.exr", ReadOptions{{}, {"color", "emission"}, ""});
+    readFrame(dir / "full.exr", ReadOptions{{}, {"color", "emission"}, "", {}});
   });
   CHECK(absent == dir / "full.exr" + ": has no 'emission' buffer");
 

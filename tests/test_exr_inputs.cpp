@@ -299,6 +299,27 @@ TEST_CASE("readImages: several channel groups in one reading, placed in the fram
         }).find("has no channel 'ViewLayer.Nothing.R'") != std::string::npos);
 }
 
+TEST_CASE("ReadOptions::extra: channel groups read with the buffers, as readImages reads them") {
+  TempDir dir;
+  writeDifferentSizedParts(dir / "parts.exr");
+  const std::vector<std::string> rgb = layerChannels("ViewLayer.Combined", {"R", "G", "B"});
+  const std::vector<std::string> alb = layerChannels("ViewLayer.Denoising Albedo");
+  ReadOptions read;
+  read.only = {"color"};
+  read.extra = {{"the albedo", alb}, {"red", {rgb[0]}}};
+  const FrameBuffers frame = readFrame(dir / "parts.exr", read);
+  CHECK(frame.names() == std::vector<std::string>{"color"});
+  const std::vector<Image> alone = readImages(dir / "parts.exr", {alb, {rgb[0]}}, frame.dataWindow);
+  REQUIRE(frame.extra.size() == 2);
+  CHECK(frame.extra.at("the albedo").pixels == alone[0].pixels);
+  CHECK(frame.extra.at("red").pixels == alone[1].pixels);
+  CHECK(bufferChannels(dir / "parts.exr").at("albedo") == alb);
+
+  read.extra = {{"missing", {"ViewLayer.Nothing.R"}}};
+  CHECK(errorOf([&] { readFrame(dir / "parts.exr", read); }) ==
+        dir / "parts.exr" + ": has no channel 'ViewLayer.Nothing.R'");
+}
+
 TEST_CASE("view layers: names with dots, --view-layer, and a line when ambiguous") {
   TempDir dir;
   // Blender 3.4 single-part: two view layers; the second's values differ.

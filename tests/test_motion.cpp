@@ -48,6 +48,15 @@ void checkConvention(const std::string& dir) {
   auto field = readMotion(middle, f2.width, f2.height);
   REQUIRE(field);
   CHECK(field->source.find("Blender") != std::string::npos);
+  // Decoded from its channels as read with the frame's buffers: the same.
+  const auto found = findMotionChannels(channelNames(middle));
+  REQUIRE(found);
+  ReadOptions withMotion;
+  withMotion.extra["motion"] = found->channels;
+  const Image vector = readFrame(middle, withMotion).extra.at("motion");
+  const MotionField decoded = decodeMotion(*found, {vector}, f2.width, f2.height, middle);
+  CHECK(decoded.toNext.pixels == field->toNext.pixels);
+  CHECK(decoded.toPrevious.pixels == field->toPrevious.pixels);
   for (std::size_t i = 0; i < field->toNext.pixelCount(); ++i) {
     REQUIRE(field->toPrevious.pixels[2 * i] == doctest::Approx(kToPrevious[0]).epsilon(0.01));
     REQUIRE(field->toPrevious.pixels[2 * i + 1] == doctest::Approx(kToPrevious[1]).epsilon(0.01));

@@ -138,6 +138,12 @@ TEST_CASE("the view-dependent share: glossy and transmitted light over the rende
   // Averaged over a box it stays a share; a file without passes has none.
   for (float v : viewDependentShare(kBlender5, frame).pixels) CHECK((v >= 0.0f && v <= 1.0f));
   CHECK(viewDependentShare(kMitsuba, readFrame(kMitsuba)).empty());
+  // Its passes read with the frame's buffers (one decoding of the file) give the same.
+  ReadOptions withPasses;
+  withPasses.extra = viewDependentChannels(kBlender5, "ViewLayer.");
+  CHECK(withPasses.extra.size() == 6);  // glossy and transmission: direct, indirect, colour
+  const FrameBuffers read = readFrame(kBlender5, withPasses);
+  CHECK(viewDependentShare(kBlender5, read, 0).pixels == share.pixels);
 }
 
 TEST_CASE("a light pass without its colour pass is not used, and says so") {

@@ -51,7 +51,7 @@ ReadOptions readInputHeader(const Options& o, const Denoiser& denoiser, const st
 // when the result is written, and holding them as float would cost 1.5 GB on a
 // 4K frame with all of Cycles' passes.
 FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::string& input,
-                       const std::string& name) {
+                       const std::string& name, const ChannelGroups& extra) {
   if (input.empty()) {
     FrameBuffers frame = readSeparateFiles(o.separateFiles);
     for (const auto& b : frame.names())
@@ -59,7 +59,9 @@ FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::st
     checkModelInputs(denoiser, name, frame.names());
     return frame;
   }
-  return readFrame(input, readInputHeader(o, denoiser, input));
+  ReadOptions read = readInputHeader(o, denoiser, input);
+  read.extra = extra;
+  return readFrame(input, read);
 }
 
 // The reference of --ref, read before any work; its size must match every input.

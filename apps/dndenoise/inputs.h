@@ -18,10 +18,11 @@ std::vector<std::string> allowed(const Options& o, std::vector<std::string> avai
 // needs (one line naming what it lacks).
 ReadOptions readInputHeader(const Options& o, const Denoiser& denoiser, const std::string& input);
 
-// The buffers the model reads of `input` (empty: the separate buffer files);
+// The buffers the model reads of `input` (empty: the separate buffer files),
+// and in the same decoding the channel groups `extra` (FrameBuffers::extra);
 // `name` names it in messages.
 FrameBuffers readInput(const Options& o, const Denoiser& denoiser, const std::string& input,
-                       const std::string& name);
+                       const std::string& name, const ChannelGroups& extra = {});
 
 // The reference of --ref, read before any work; its size must match every input.
 Image readReference(const Options& o);

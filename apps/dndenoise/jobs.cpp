@@ -114,6 +114,9 @@ std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& j
   settings.viewDependentShare = [](const std::string& path, const FrameBuffers& frame) {
     return viewDependentShare(path, frame);
   };
+  settings.viewDependentChannels = [](const std::string& path, const std::string& layerPrefix) {
+    return viewDependentChannels(path, layerPrefix);
+  };
   std::vector<std::string> files;
   for (const auto& job : jobs) files.push_back(job.first);
   std::string frameByFrame;

@@ -593,6 +593,10 @@ FrameBuffers readLocated(OIIO::ImageInput& in, const ChannelTable& table, const 
       wanted.push_back(&l);
       groups.push_back(l.channels);
     }
+  for (const auto& [name, channels] : options.extra) {
+    if (channels.empty()) fail(path, "an empty channel group was asked for");
+    groups.push_back(channels);
+  }
   const std::string alpha = alphaChannelOf(table, *color);
   if (!alpha.empty()) groups.push_back({alpha});
   std::vector<Image> images = readChannelGroups(in, table, path, groups, frame.dataWindow);
@@ -606,6 +610,8 @@ FrameBuffers readLocated(OIIO::ImageInput& in, const ChannelTable& table, const 
     frame.buffers[name] = std::move(image);
     frame.sourceChannels[name] = channels;
   }
+  std::size_t next = wanted.size();
+  for (const auto& entry : options.extra) frame.extra[entry.first] = std::move(images[next++]);
   if (!alpha.empty()) frame.alpha = std::move(images.back());
   if (color->front().find("Noisy Image") != std::string::npos)
     frame.notes.push_back("color: from '" + color->front().substr(0, color->front().rfind('.')) +
@@ -654,6 +660,14 @@ std::vector<std::string> availableBuffers(const std::string& path, const ReadOpt
   return names;
 }
 
+ChannelGroups bufferChannels(const std::string& path, const ReadOptions& options) {
+  auto in = openInput(path);
+  ChannelGroups channels;
+  for (const auto& l : locateBuffers(scanChannels(*in, path), path, options))
+    channels[l.buffer] = l.channels;
+  return channels;
+}
+
 FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
   auto in = openInput(path);
   ChannelTable table = scanChannels(*in, path);
@@ -675,6 +689,7 @@ FrameBuffers readFrame(const std::string& path, const ReadOptions& options) {
     frame.readUnread = [path, options](const std::vector<std::string>& names) {
       ReadOptions more = options;
       more.only = names;
+      more.extra.clear();
       auto again = openInput(path);
       const ChannelTable table = scanChannels(*again, path);
       return readLocated(*again, table, path, locateBuffers(table, path, more), more).buffers;

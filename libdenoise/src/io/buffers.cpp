@@ -138,8 +138,12 @@ FrameBuffers withUnread(const FrameBuffers& frame, const std::vector<std::string
 
 std::string layerPrefixOf(const FrameBuffers& frame, const std::string& buffer) {
   auto it = frame.sourceChannels.find(buffer);
-  if (it == frame.sourceChannels.end() || it->second.empty()) return "";
-  const std::string& channel = it->second.front();
+  return it == frame.sourceChannels.end() ? "" : layerPrefixOf(it->second);
+}
+
+std::string layerPrefixOf(const std::vector<std::string>& sourceChannels) {
+  if (sourceChannels.empty()) return "";
+  const std::string& channel = sourceChannels.front();
   auto lastDot = channel.rfind('.');
   if (lastDot == std::string::npos) return "";
   auto layerDot = channel.rfind('.', lastDot - 1);  // "ViewLayer.Combined.R" -> "ViewLayer."

@@ -121,6 +121,31 @@ std::optional<MotionChannels> unnamedChannels(const std::vector<std::string>& na
 
 }  // namespace
 
+MotionField decodeMotion(const MotionChannels& found, const std::vector<Image>& read, int width,
+                         int height, const std::string& path) {
+  const Image& first = read.front();
+  if (first.width != width || first.height != height)
+    throw IoError(path + ": the motion is " + std::to_string(first.width) + "x" +
+                  std::to_string(first.height) + " but the frame is " + std::to_string(width) +
+                  "x" + std::to_string(height));
+  for (float v : first.pixels)
+    if (!std::isfinite(v)) throw IoError(path + ": the motion holds NaN or Inf values");
+  MotionField field;
+  switch (found.convention) {
+    case Convention::BlenderVector:
+      field = decodeBlenderVector(first);
+      break;
+    case Convention::ForwardPixels:
+      field = decodeForward(first);
+      break;
+    case Convention::BackFore:
+      field = decodeBackFore(first, read.back());
+      break;
+  }
+  field.source = path + ": motion from " + describe(found);
+  return field;
+}
+
 std::optional<MotionField> readMotion(const std::string& path, int width, int height,
                                       const std::string& viewLayer, bool separate) {
   const std::vector<std::string> names = channelNames(path);
@@ -133,30 +158,7 @@ std::optional<MotionField> readMotion(const std::string& path, int width, int he
                     "motionBack/motionFore, or 2 to 4 plain channels)");
     return std::nullopt;
   }
-  std::vector<std::vector<std::string>> groups = {found->channels};
-  if (found->convention == Convention::BackFore) groups.push_back(found->channels2);
-  std::vector<Image> read = readImages(path, groups);
-  const Image& first = read.front();
-  if (first.width != width || first.height != height)
-    throw IoError(path + ": the motion is " + std::to_string(first.width) + "x" +
-                  std::to_string(first.height) + " but the frame is " + std::to_string(width) +
-                  "x" + std::to_string(height));
-  for (float v : first.pixels)
-    if (!std::isfinite(v)) throw IoError(path + ": the motion holds NaN or Inf values");
-  MotionField field;
-  switch (found->convention) {
-    case Convention::BlenderVector:
-      field = decodeBlenderVector(first);
-      break;
-    case Convention::ForwardPixels:
-      field = decodeForward(first);
-      break;
-    case Convention::BackFore:
-      field = decodeBackFore(first, read.back());
-      break;
-  }
-  field.source = path + ": motion from " + describe(*found);
-  return field;
+  return decodeMotion(*found, readImages(path, found->groups()), width, height, path);
 }
 
 }  // namespace dn::motion

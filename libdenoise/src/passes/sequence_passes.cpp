@@ -60,33 +60,61 @@ temporal::CompanionMaker lightPassCompanions(const OidnBase& base,
   return maker;
 }
 
-Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius) {
-  const LightPassLayout layout = findLightPasses(channelNames(path), layerPrefixOf(frame));
-  const Image& color = frame.get("color");
-  // The view-dependent lights and their tints, read in one decoding of the file.
-  std::vector<std::pair<std::string, std::string>> lights;  // light, its tint ("": none)
-  std::map<std::string, std::size_t> index;                 // pass -> its image below
-  std::vector<std::vector<std::string>> groups;
+namespace {
+
+// The view-dependent lights of a file's passes, each with its tint ("": none),
+// and the channels of each pass they need, by FrameBuffers::extra's name.
+struct ViewDependentLights {
+  std::vector<std::pair<std::string, std::string>> lights;
+  ChannelGroups channels;
+};
+
+const std::string kExtraPrefix = "view-dependent ";
+
+ViewDependentLights viewDependentLights(const std::string& path, const std::string& layerPrefix) {
+  const LightPassLayout layout = findLightPasses(channelNames(path), layerPrefix);
+  ViewDependentLights out;
   auto want = [&](const std::string& key) {
-    if (key.empty() || index.count(key)) return;
-    index[key] = groups.size();
-    groups.push_back(layout.channels.at(key));
+    if (!key.empty()) out.channels[kExtraPrefix + key] = layout.channels.at(key);
   };
   for (const LightPassTerm& term : layout.terms)
     for (const std::string& key : term.lights)
       if (const LightPassSpec* spec = layout.rule->find(key); spec && spec->viewDependent) {
-        lights.emplace_back(key, term.color);
+        out.lights.emplace_back(key, term.color);
         want(key);
         want(term.color);
       }
+  return out;
+}
+
+}  // namespace
+
+ChannelGroups viewDependentChannels(const std::string& path, const std::string& layerPrefix) {
+  return viewDependentLights(path, layerPrefix).channels;
+}
+
+Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius) {
+  const auto [lights, channels] = viewDependentLights(path, layerPrefixOf(frame));
   if (lights.empty()) return Image();
-  const std::vector<Image> images = readImages(path, groups, frame.dataWindow);
-  for (const Image& image : images)  // readLightPasses names a wrong size, when asked for
-    if (!image.sameShape(color)) return Image();
+  const Image& color = frame.get("color");
+  // The passes as read with the frame (ReadOptions::extra), else in one decoding now.
+  std::map<std::string, const Image*> images;
+  std::vector<std::string> missing;
+  std::vector<std::vector<std::string>> groups;
+  for (const auto& [name, group] : channels)
+    if (auto it = frame.extra.find(name); it != frame.extra.end())
+      images[name] = &it->second;
+    else
+      missing.push_back(name), groups.push_back(group);
+  const std::vector<Image> read =
+      groups.empty() ? std::vector<Image>() : readImages(path, groups, frame.dataWindow);
+  for (std::size_t k = 0; k < missing.size(); ++k) images[missing[k]] = &read[k];
+  for (const auto& entry : images)  // readLightPasses names a wrong size, when asked for
+    if (!entry.second->sameShape(color)) return Image();
   Image moving(color.width, color.height, 1), all(color.width, color.height, 1);
   for (const auto& [key, tintKey] : lights) {
-    const Image& light = images[index.at(key)];
-    const Image* tint = tintKey.empty() ? nullptr : &images[index.at(tintKey)];
+    const Image& light = *images.at(kExtraPrefix + key);
+    const Image* tint = tintKey.empty() ? nullptr : images.at(kExtraPrefix + tintKey);
     for (std::size_t i = 0; i < color.pixelCount(); ++i)
       for (int c = 0; c < 3; ++c) {
         const float v =

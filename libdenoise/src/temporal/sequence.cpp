@@ -32,14 +32,16 @@ struct Sequence::Input {
 namespace {
 
 // The albedo, normal and depth of a frame file: the guides of reprojection.
-// Taken from the buffers already read where the model reads them (one
-// decoding of the file less), else read.
+// Taken from the buffers and the extra channels read (one decoding of the
+// file less), else read.
 motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
                         const ReadOptions& base) {
   ReadOptions read = base;
   read.only = {"color"};
+  const bool depthRead = frame.extra.count("depth") != 0;
   for (const auto& b : availableBuffers(path, base))
-    if ((b == "albedo" || b == "normal" || b == "depth") && !frame.has(b)) read.only.push_back(b);
+    if ((b == "albedo" || b == "normal" || (b == "depth" && !depthRead)) && !frame.has(b))
+      read.only.push_back(b);
   const FrameBuffers extra = read.only.size() > 1 ? readFrame(path, read) : FrameBuffers();
   auto guide = [&](const std::string& name) {
     return frame.has(name) ? frame.get(name) : extra.has(name) ? extra.get(name) : Image();
@@ -47,7 +49,7 @@ motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
   motion::Guides g;
   g.albedo = guide("albedo");
   g.normal = guide("normal");
-  g.depth = guide("depth");
+  g.depth = depthRead ? frame.extra.at("depth") : guide("depth");
   return g;
 }
 
@@ -64,6 +66,9 @@ FrameBuffers withHistory(const FrameBuffers& frame, Image history, const Image& 
   }
   return out;
 }
+
+// FrameBuffers::extra's names of the motion channels' groups (MotionChannels::groups).
+const char* const kMotionGroups[] = {"motion", "motion (second group)"};
 
 bool allZero(const Image* image) {
   return !image ||
@@ -111,6 +116,35 @@ std::string Sequence::fileOf(int number) const {
   return fs::exists(path, ec) ? path : std::string();
 }
 
+ChannelGroups Sequence::extraChannels(const std::string& path) const {
+  ChannelGroups buffers = bufferChannels(path, settings_.read);
+  ChannelGroups extra;
+  if (buffers.count("depth")) extra["depth"] = buffers.at("depth");
+  if (settings_.motion.empty())
+    if (auto found = motion::findMotionChannels(channelNames(path), settings_.read.viewLayer)) {
+      const auto groups = found->groups();
+      for (std::size_t k = 0; k < groups.size(); ++k) extra[kMotionGroups[k]] = groups[k];
+    }
+  if (settings_.viewDependentShare && settings_.viewDependentChannels)
+    extra.merge(settings_.viewDependentChannels(path, layerPrefixOf(buffers["color"])));
+  return extra;
+}
+
+std::optional<motion::MotionField> Sequence::motionOf(int number, const std::string& path,
+                                                      const FrameBuffers& frame) const {
+  if (!settings_.motion.empty())
+    return motion::readMotion(frameFile(settings_.motion, number), frame.width, frame.height, "",
+                              true);
+  if (frame.extra.count(kMotionGroups[0])) {
+    const auto found = motion::findMotionChannels(channelNames(path), settings_.read.viewLayer);
+    std::vector<Image> read = {frame.extra.at(kMotionGroups[0])};
+    if (frame.extra.count(kMotionGroups[1])) read.push_back(frame.extra.at(kMotionGroups[1]));
+    if (found && found->groups().size() == read.size())
+      return motion::decodeMotion(*found, read, frame.width, frame.height, path);
+  }
+  return motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer);
+}
+
 std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers* given,
                                                  const Read& read) {
   if (auto it = inputs_.find(number); it != inputs_.end()) return it->second;
@@ -118,18 +152,14 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   if (path.empty()) return nullptr;
   auto entry = std::make_shared<Input>();
   // A given frame is denoised straight from the caller's buffers.
-  if (!given) entry->buffers = read(path);
+  if (!given) entry->buffers = read(path, extraChannels(path));
   const FrameBuffers& frame = given ? *given : entry->buffers;
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = guidesOf(frame, path, settings_.read);
   if (settings_.viewDependentShare)
     entry->frame.viewDependent = settings_.viewDependentShare(path, frame);
-  std::optional<motion::MotionField> field =
-      settings_.motion.empty()
-          ? motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer)
-          : motion::readMotion(frameFile(settings_.motion, number), frame.width, frame.height, "",
-                               true);
-  if (field) entry->frame.motion = std::move(*field);
+  if (auto field = motionOf(number, path, frame)) entry->frame.motion = std::move(*field);
+  entry->buffers.extra.clear();
   inputs_[number] = entry;
   return entry;
 }
@@ -221,7 +251,7 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
     Filtered earlier = filtered(m, nullptr, read, denoise);
     if (!earlier.alone) continue;
     earlier.result.weights = FilterWeights();  // only the passes of the frames asked for use them
-    denoisedHistory(m, read(fileOf(m)), earlier.result, denoise);
+    denoisedHistory(m, read(fileOf(m), {}), earlier.result, denoise);
   }
 }
 
@@ -230,7 +260,7 @@ const Companions& Sequence::companionsOf(int number, const FrameBuffers* given, 
   Input& entry = *inputs_.at(number);
   if (!entry.companions) {
     const std::string path = fileOf(number);
-    entry.companions = make.make(path, given ? *given : read(path));
+    entry.companions = make.make(path, given ? *given : read(path, {}));
   }
   return *entry.companions;
 }
@@ -332,15 +362,16 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
 
 DenoiseResult Sequence::denoise(const std::string& file, const Denoiser& denoiser,
                                 const DenoiseOptions& options) {
-  const Read read = [&](const std::string& path) {
+  const Read read = [&](const std::string& path, const ChannelGroups& extra) {
     ReadOptions only = settings_.read;
     only.only = denoiser.buffersToRead(availableBuffers(path, only), options);
+    only.extra = extra;
     return readFrame(path, only);
   };
   const Denoise alone = [&](const std::string&, const FrameBuffers& frame) {
     return denoiser.denoise(frame, options);
   };
-  return denoise(file, read(file), read, alone);
+  return denoise(file, read(file, {}), read, alone);
 }
 
 std::string Sequence::report() const {

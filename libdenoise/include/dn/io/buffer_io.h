@@ -18,6 +18,9 @@ class IoError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Groups of named channels by a caller's name.
+using ChannelGroups = std::map<std::string, std::vector<std::string>>;
+
 struct ReadOptions {
   // Explicit channel lists per canonical buffer, e.g.
   // {"albedo", {"diffuse.R", "diffuse.G", "diffuse.B"}}; they win over name lookup.
@@ -28,6 +31,10 @@ struct ReadOptions {
   // may hold dots and spaces). "": the file's only one; with several (Blender's
   // "Composite" aside) reading fails with a line that lists them.
   std::string viewLayer;
+  // Channel groups read in the same decoding as the buffers, by the caller's
+  // name, into FrameBuffers::extra: what it needs beside the buffers (motion
+  // vectors, light passes) without decompressing the file again.
+  ChannelGroups extra;
 };
 
 // The view layers of a multilayer file, sorted: the prefixes in front
@@ -49,6 +56,10 @@ FrameBuffers readFrame(const std::string& path, const ReadOptions& options = {})
 // The canonical buffers readFrame would find in the file (options.only aside),
 // in canonical order, from the header alone: no pixels are read.
 std::vector<std::string> availableBuffers(const std::string& path, const ReadOptions& options = {});
+
+// The channels of each canonical buffer readFrame would find in the file
+// (options.only aside), from the header alone.
+ChannelGroups bufferChannels(const std::string& path, const ReadOptions& options = {});
 
 // Every channel name of a file (all parts), for listings and layer lookups.
 std::vector<std::string> channelNames(const std::string& path);

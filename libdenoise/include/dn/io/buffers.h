@@ -55,6 +55,8 @@ struct FrameBuffers {
   PixelWindow dataWindow;     // where the buffers' pixels sit in the frame
   PixelWindow displayWindow;  // the whole frame
   std::map<std::string, Image> buffers;
+  // The channel groups of ReadOptions::extra, by the caller's names.
+  std::map<std::string, Image> extra;
   // The colour's alpha (one channel), empty when the colour has none: the
   // result layer carries it.
   Image alpha;
@@ -89,5 +91,7 @@ FrameBuffers withUnread(const FrameBuffers& frame, const std::vector<std::string
 // The layer prefix the colour came from ("ViewLayer." for Blender, "" for plain
 // RGB), so results can be written as a sibling pass: prefix + "Denoised".
 std::string layerPrefixOf(const FrameBuffers& frame, const std::string& buffer = "color");
+// The same from a buffer's channel names.
+std::string layerPrefixOf(const std::vector<std::string>& sourceChannels);
 
 }  // namespace dn

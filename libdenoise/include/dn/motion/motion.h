@@ -55,9 +55,20 @@ struct MotionChannels {
   Convention convention = Convention::BlenderVector;
   std::vector<std::string> channels;   // Blender: X, Y, Z, W; forward: x, y; RenderMan: back x, y
   std::vector<std::string> channels2;  // RenderMan: fore x, y
+  // The groups to read (each one image): channels, then channels2 if any.
+  std::vector<std::vector<std::string>> groups() const {
+    return channels2.empty() ? std::vector<std::vector<std::string>>{channels}
+                             : std::vector<std::vector<std::string>>{channels, channels2};
+  }
 };
 std::optional<MotionChannels> findMotionChannels(const std::vector<std::string>& channelNames,
                                                  const std::string& viewLayer = "");
+
+// The motion from `found`'s groups as read (MotionChannels::groups) of file
+// `path`; throws dn::IoError naming the file when it is not width x height or
+// holds NaN or Inf.
+MotionField decodeMotion(const MotionChannels& found, const std::vector<Image>& read, int width,
+                         int height, const std::string& path);
 
 // The motion of a frame file (its motion pass), or of a separate motion file
 // (`separate` = true: a file of just 4 or 2 channels is read as Blender's Vector

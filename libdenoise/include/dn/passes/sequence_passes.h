@@ -51,7 +51,13 @@ temporal::CompanionMaker lightPassCompanions(const OidnBase& base,
 // each times its term's colour), both averaged over a (2 radius + 1)^2 box of
 // the noisy render, in [0, 1]: the temporal filter's
 // WindowFrame::viewDependent. Empty where the file has no such passes.
+// The passes are taken from frame.extra where read there (viewDependentChannels).
 Image viewDependentShare(const std::string& path, const FrameBuffers& frame, int radius = 2);
+
+// The channels viewDependentShare reads of `path`, for ReadOptions::extra:
+// read with the frame's buffers, the file is decoded once. `layerPrefix`: the
+// colour's (layerPrefixOf).
+ChannelGroups viewDependentChannels(const std::string& path, const std::string& layerPrefix);
 
 // The frame's passes as filtered (Sequence's companions of lightPassCompanions)
 // made to recombine to `denoisedBeauty`, and named for writing.

@@ -35,6 +35,11 @@ struct SequenceSettings {
   // buffers as Read gives them (empty where the file cannot tell); dndenoise
   // sets dn::viewDependentShare (dn/passes/sequence_passes.h).
   std::function<Image(const std::string& path, const FrameBuffers& frame)> viewDependentShare;
+  // Where set, the channels viewDependentShare reads of a frame's file (by the
+  // colour's layer prefix), asked of Read with the buffers (ReadOptions::extra),
+  // so that each file is decoded once (dn::viewDependentChannels).
+  std::function<ChannelGroups(const std::string& path, const std::string& layerPrefix)>
+      viewDependentChannels;
   // Unset: the filter runs on the CPU (temporal_filter.h; its output does not
   // change). Set: as tensor operations on this device (device_filter.h), each
   // frame copied there once and kept while in the window, the colour copied
@@ -72,7 +77,9 @@ struct CompanionMaker {
 
 class Sequence {
  public:
-  using Read = std::function<FrameBuffers(const std::string& path)>;
+  // Reads a frame's buffers, and in the same decoding the channel groups
+  // `extra` into FrameBuffers::extra (ReadOptions::extra).
+  using Read = std::function<FrameBuffers(const std::string& path, const ChannelGroups& extra)>;
   // Denoises `frame`, which is the frame of file `path`.
   using Denoise = std::function<DenoiseResult(const std::string& path, const FrameBuffers& frame)>;
 
@@ -107,6 +114,10 @@ class Sequence {
   DenoiseResult denoise(const std::string& file, const Denoiser& denoiser,
                         const DenoiseOptions& options);
 
+  // What the sequence asks Read for beside the buffers of file `path`: the
+  // depth guide, the motion vectors, the view-dependent passes.
+  ChannelGroups extraChannels(const std::string& path) const;
+
   // How much of the last frame came from history.
   const TemporalStats& lastStats() const { return lastStats_; }
   int lastFrame() const { return lastNumber_; }
@@ -120,6 +131,10 @@ class Sequence {
   struct Input;
   Sequence(std::string pattern, std::map<std::string, int> numbers, SequenceSettings settings);
   std::shared_ptr<Input> input(int number, const FrameBuffers* given, const Read& read);
+  // Frame `number`'s motion (file `path`, read as `frame`): from its extra
+  // channels where read there, else read.
+  std::optional<motion::MotionField> motionOf(int number, const std::string& path,
+                                              const FrameBuffers& frame) const;
   // A frame's own estimate: denoised alone.
   std::shared_ptr<const DenoiseResult> estimate(int number, const FrameBuffers* given,
                                                 const Read& read, const Denoise& denoise);
