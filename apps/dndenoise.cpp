@@ -58,6 +58,7 @@ int run(Options o, int argc, char** argv) {
   // Freed activations are reused, not handed back to the kernel to be zeroed
   // again, within the peak the networks reach anyway (dn/nn/reusing_allocator.h).
   useReusingCpuAllocator(static_cast<std::size_t>(o.denoise.maxMemoryBytes));
+  useReusingAllocatorForNew();
   const auto loadStart = Clock::now();
   // The checksum for the outputs' metadata, on the core the loading leaves idle.
   auto modelSha256 = std::async(std::launch::async, [&] { return sha256OfFile(o.model); });

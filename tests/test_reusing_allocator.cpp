@@ -2,7 +2,10 @@
 // comes back for its size or serves smaller ones, pieces merge again when
 // freed, a larger request grows the cached range at the top, the cache stays
 // within its cap and under the high-water mark of the memory in use, small
-// blocks are left to malloc, and tensors made through it hold their values.
+// blocks are left to malloc, tensors made through it hold their values, and
+// asked to, operator new takes its large blocks from the same cache.
+#include <vector>
+
 #include "doctest_torch.h"
 
 #include "dn/nn/reusing_allocator.h"
@@ -100,4 +103,29 @@ TEST_CASE("tensors through the allocator compute as usual") {
     CHECK(b[12345].item<float>() == 2 * 12345 + 1);
     CHECK(b.sum().item<double>() == doctest::Approx(double(1 << 22) * (1 << 22)).epsilon(1e-6));
   }
+}
+
+// Last in the file: from here on the test program's large blocks come from the cache.
+TEST_CASE("asked to, operator new's large blocks share the cache with the tensors") {
+  emptyCache(64 * kMiB);
+  useReusingAllocatorForNew();
+  const float* data = nullptr;
+  {
+    torch::Tensor t = floats(8 * kMiB);  // freed by a tensor...
+    data = static_cast<const float*>(t.data_ptr());
+  }
+  {
+    std::vector<float> image(4 * kMiB / sizeof(float), 1.0f);  // ...taken by a vector
+    CHECK(image.data() == data);
+    CHECK(reusingCpuAllocatorCachedBytes() < 8 * kMiB);
+  }
+  CHECK(reusingCpuAllocatorCachedBytes() >= 8 * kMiB);  // and given back to the cache
+  const std::size_t before = reusingCpuAllocatorCachedBytes();
+  { std::vector<float> small(kMiB / 8); }  // under 1 MiB: malloc's
+  CHECK(reusingCpuAllocatorCachedBytes() == before);
+  auto* bytes = new char[2 * kMiB];  // arrays too
+  bytes[2 * kMiB - 1] = 1;
+  CHECK(reusingCpuAllocatorCachedBytes() < before);
+  delete[] bytes;
+  CHECK(reusingCpuAllocatorCachedBytes() == before);
 }

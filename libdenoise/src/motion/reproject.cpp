@@ -170,42 +170,46 @@ void checkGuides(const Guides& g, int width, int height) {
 
 }  // namespace
 
-Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
-                     const TrustOptions& options) {
+std::vector<Image> chainPositionsAlong(const std::vector<FrameGeometry>& chain, bool forward,
+                                       const TrustOptions& options) {
   if (chain.size() < 2) throw std::invalid_argument("chainPositions: needs two frames or more");
   const int width = chain.front().motion->width(), height = chain.front().motion->height();
   for (const auto& frame : chain)
     if (!frame.motion || frame.motion->empty() || frame.motion->width() != width ||
         frame.motion->height() != height)
       throw std::invalid_argument("chainPositions: every frame needs motion of the same size");
-  Image positions(width, height, 2);
+  std::vector<Image> positions(chain.size() - 1, Image(width, height, 2));
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
       float qx = static_cast<float>(x), qy = static_cast<float>(y);
-      for (std::size_t hop = 0; hop + 1 < chain.size() && !std::isnan(qx); ++hop) {
-        const Image& there = forward ? chain[hop].motion->toNext : chain[hop].motion->toPrevious;
-        const float* off = there.pixel(nearest(qx, width), nearest(qy, height));
-        const float nx = qx + off[0], ny = qy + off[1];
-        if (!onScreen(nx, ny, width, height)) {
-          qx = qy = kLost;
-          break;
+      for (std::size_t hop = 0; hop + 1 < chain.size(); ++hop) {
+        if (!std::isnan(qx)) {
+          const Image& there = forward ? chain[hop].motion->toNext : chain[hop].motion->toPrevious;
+          const float* off = there.pixel(nearest(qx, width), nearest(qy, height));
+          const float nx = qx + off[0], ny = qy + off[1];
+          // The neighbour's own motion back must return here: where it does
+          // not, the neighbour shows something else at that place (an occluder).
+          const Image& back =
+              forward ? chain[hop + 1].motion->toPrevious : chain[hop + 1].motion->toNext;
+          const float* ret = onScreen(nx, ny, width, height)
+                                 ? back.pixel(nearest(nx, width), nearest(ny, height))
+                                 : nullptr;
+          const float ex = ret ? nx + ret[0] - qx : 0.0f, ey = ret ? ny + ret[1] - qy : 0.0f;
+          if (!ret || ex * ex + ey * ey > options.roundTripPixels * options.roundTripPixels)
+            qx = qy = kLost;
+          else
+            qx = nx, qy = ny;
         }
-        // The neighbour's own motion back must return here: where it does not,
-        // the neighbour shows something else at that place (an occluder).
-        const Image& back =
-            forward ? chain[hop + 1].motion->toPrevious : chain[hop + 1].motion->toNext;
-        const float* ret = back.pixel(nearest(nx, width), nearest(ny, height));
-        const float ex = nx + ret[0] - qx, ey = ny + ret[1] - qy;
-        if (ex * ex + ey * ey > options.roundTripPixels * options.roundTripPixels) {
-          qx = qy = kLost;
-          break;
-        }
-        qx = nx, qy = ny;
+        positions[hop].at(x, y, 0) = qx;
+        positions[hop].at(x, y, 1) = qy;
       }
-      positions.at(x, y, 0) = qx;
-      positions.at(x, y, 1) = qy;
     }
   return positions;
+}
+
+Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
+                     const TrustOptions& options) {
+  return std::move(chainPositionsAlong(chain, forward, options).back());
 }
 
 Resampling planResampling(const Guides& sourceGuides, const Image& positions,

@@ -1,6 +1,7 @@
 #include "dn/nn/reusing_allocator.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -123,6 +124,16 @@ class ReusingCpuAllocator final : public c10::Allocator {
     return block + kHeader;
   }
 
+ public:
+  // A block of at least `bytes` from the arena, for operator new; null where
+  // there is none (no arena, or full).
+  void* takeFromArena(std::size_t bytes) {
+    if (!base_) return nullptr;
+    std::lock_guard<std::mutex> lock(mutex_);
+    char* block = carveArena(roundUp(bytes + kHeader, kHugePage));
+    return block ? block + kHeader : nullptr;
+  }
+  bool owns(const void* data) const { return inArena(static_cast<const char*>(data) - kHeader); }
   static void release(void* data) {
     if (!data) return;
     char* block = static_cast<char*>(data) - kHeader;
@@ -135,6 +146,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
     self.dropCachedPastCap();
   }
 
+ private:
   // A block of `length` (whole huge pages) from the arena, or null when it is full.
   char* carveArena(std::size_t length) {
     std::optional<std::size_t> offset = takeBestFit(cachedBySize_, length);
@@ -256,4 +268,37 @@ void useReusingCpuAllocator(std::size_t maxCachedBytes) {
 
 std::size_t reusingCpuAllocatorCachedBytes() { return ReusingCpuAllocator::instance().cached(); }
 
+namespace {
+std::atomic<bool> forNew{false};
+}  // namespace
+
+void useReusingAllocatorForNew() {
+  ReusingCpuAllocator::instance();  // reserved before the first block is routed
+  forNew = true;
+}
+
 }  // namespace dn
+
+// Replacements of the global operator new and delete (the others forward to
+// these): large blocks from the arena once useReusingAllocatorForNew is called,
+// everything else from malloc, as the default ones do.
+void* operator new(std::size_t bytes) {
+  using dn::ReusingCpuAllocator;
+  if (dn::forNew && bytes >= dn::kMinCachedBlock)
+    if (void* block = ReusingCpuAllocator::instance().takeFromArena(bytes)) return block;
+  for (;;) {
+    if (void* block = std::malloc(bytes ? bytes : 1)) return block;
+    std::new_handler handler = std::get_new_handler();
+    if (!handler) throw std::bad_alloc();
+    handler();
+  }
+}
+
+void operator delete(void* data) noexcept {
+  using dn::ReusingCpuAllocator;
+  if (data && dn::forNew && ReusingCpuAllocator::instance().owns(data))
+    return ReusingCpuAllocator::release(data);
+  std::free(data);
+}
+
+void operator delete(void* data, std::size_t) noexcept { operator delete(data); }

@@ -380,13 +380,11 @@ std::vector<float> normalisedDifference(const Centre& centre, const Image& image
   return d;
 }
 
-// `chain`: the centre's geometry, then each frame's up to the neighbour.
-Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour,
-                            const std::vector<motion::FrameGeometry>& chain, bool forward,
-                            const TemporalOptions& options) {
+// `positions`: where each pixel of the centre is in the neighbour (motion::chainPositions).
+Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, Image positions,
+                            bool forward, const TemporalOptions& options) {
   const WindowFrame& current = *centre.frame;
   Contribution out;
-  Image positions = motion::chainPositions(chain, forward, options.trust);
   // Only the past carries a denoised history: frames are made in order, and
   // a frame's result must not depend on how far its successors have got.
   Image still;
@@ -718,15 +716,16 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   if (!current.viewDependent.empty() &&
       current.viewDependent.pixelCount() != current.denoised.pixelCount())
     throw std::invalid_argument("filterFrame: the view-dependent share differs in size");
-  // The neighbours in order (the past nearest first, then the future), each
-  // with the chain of frames its motion is followed along; a gap ends a side.
+  // The neighbours in order (the past nearest first, then the future); a gap
+  // ends a side. Each side's motion is followed along the frames in one pass.
   struct Neighbour {
     const WindowFrame* frame;
     std::size_t index;  // in the window
-    std::vector<motion::FrameGeometry> chain;
     bool forward;
+    Image positions;  // where each pixel of the frame is in it
   };
   std::vector<Neighbour> neighbours;
+  std::vector<std::vector<motion::FrameGeometry>> chains;  // per side, from the frame out
   for (int side : {-1, 1}) {
     std::vector<motion::FrameGeometry> chain = {geometryOf(current)};
     for (int k = 1; k <= options.radius; ++k) {
@@ -734,14 +733,22 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
       if (index < 0 || index >= static_cast<long>(window.size()) || !window[index]) break;
       if (window[index]->motion.empty() || current.motion.empty()) break;
       chain.push_back(geometryOf(*window[index]));
-      neighbours.push_back({window[index], static_cast<std::size_t>(index), chain, side > 0});
+      neighbours.push_back({window[index], static_cast<std::size_t>(index), side > 0, {}});
     }
+    chains.push_back(std::move(chain));
   }
+  forEach(chains.size(), options.threads, [&](std::size_t side) {
+    if (chains[side].size() < 2) return;
+    std::vector<Image> along = motion::chainPositionsAlong(chains[side], side == 1, options.trust);
+    const std::size_t first = side == 0 ? 0 : chains[0].size() - 1;
+    for (std::size_t k = 0; k < along.size(); ++k)
+      neighbours[first + k].positions = std::move(along[k]);
+  });
   const Centre c = centreOf(current);
   std::vector<Contribution> contributions(neighbours.size());
   forEach(neighbours.size(), options.threads, [&](std::size_t n) {
-    const Neighbour& nb = neighbours[n];
-    contributions[n] = contributionOf(c, *nb.frame, nb.chain, nb.forward, options);
+    Neighbour& nb = neighbours[n];
+    contributions[n] = contributionOf(c, *nb.frame, std::move(nb.positions), nb.forward, options);
   });
   // The learned trust's view of each neighbour, where it or an observer needs it.
   std::vector<std::vector<float>> features(contributions.size());

@@ -48,6 +48,10 @@ struct FrameGeometry {
 // failed (a disocclusion: the neighbour's own motion back does not return).
 Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
                      const TrustOptions& options = {});
+// The same for every frame of the chain after the first, in one pass along
+// it: element k is chainPositions of chain[0 .. k + 1], bit for bit.
+std::vector<Image> chainPositionsAlong(const std::vector<FrameGeometry>& chain, bool forward,
+                                       const TrustOptions& options = {});
 
 // A neighbour's image resampled at `positions` (bilinear over the taps whose
 // guides match the current frame's around the destination pixel; Catmull-Rom

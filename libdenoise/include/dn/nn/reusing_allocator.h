@@ -25,4 +25,10 @@ void useReusingCpuAllocator(std::size_t maxCachedBytes);
 // Bytes of freed blocks held for reuse now.
 std::size_t reusingCpuAllocatorCachedBytes();
 
+// Also serves the program's large blocks from operator new (images, weights)
+// from the same memory, within the same cap: what the networks leave free
+// between runs then holds, say, a sequence's temporal filter's images, where
+// malloc would take fresh memory on top and give it back on every free.
+void useReusingAllocatorForNew();
+
 }  // namespace dn
