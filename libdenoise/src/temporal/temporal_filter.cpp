@@ -74,33 +74,33 @@ double robustSpread(const std::vector<float>& d, const Image& trust) {
 }
 
 // Sums of per-pixel values over boxes of (2r+1)^2 pixels, clipped to the
-// image, from integral images: `values(i, v)` writes pixel i's `count` values.
+// image, from integral images: `values(i, v)` writes pixel i's `count`
+// values. The integral's rows are made as the boxes move down and only the
+// 2r+2 a box spans are kept (7 MB for a 63x63 box of 7 values at 1080p, not
+// 124 MB), so boxes are asked for row after row, never going back up.
+template <class Values>
 class BoxSums {
  public:
-  template <class Values>
-  BoxSums(int width, int height, int count, Values values)
+  BoxSums(int width, int height, int count, int r, Values values)
       : width_(width),
         height_(height),
         count_(count),
-        integral_((width + 1) * std::size_t(height + 1) * count) {
-    std::vector<double> v(count);
-    for (int y = 0; y < height; ++y)
-      for (int x = 0; x < width; ++x) {
-        std::fill(v.begin(), v.end(), 0.0);
-        values(static_cast<std::size_t>(y) * width + x, v.data());
-        for (int k = 0; k < count; ++k)
-          at(x + 1, y + 1, k) = v[k] + at(x + 1, y, k) + at(x, y + 1, k) - at(x, y, k);
-      }
-  }
+        r_(r),
+        rows_(std::min(2 * r + 2, height + 1)),
+        values_(std::move(values)),
+        integral_(static_cast<std::size_t>(rows_) * (width + 1) * count, 0.0),
+        v_(count) {}
 
-  // The box of radius r around (x, y) and its pixel count, clipped.
+  // The box around (x, y) and its pixel count, clipped.
   struct Box {
     int x0, y0, x1, y1;
     int pixels() const { return (x1 - x0) * (y1 - y0); }
   };
-  Box box(int x, int y, int r) const {
-    return {std::max(0, x - r), std::max(0, y - r), std::min(width_, x + r + 1),
-            std::min(height_, y + r + 1)};
+  Box box(int x, int y) {
+    const Box b{std::max(0, x - r_), std::max(0, y - r_), std::min(width_, x + r_ + 1),
+                std::min(height_, y + r_ + 1)};
+    while (made_ < b.y1) makeRow();
+    return b;
   }
 
   double sum(const Box& b, int k) const {
@@ -108,15 +108,28 @@ class BoxSums {
   }
 
  private:
-  double& at(int x, int y, int k) {
-    return integral_[(static_cast<std::size_t>(y) * (width_ + 1) + x) * count_ + k];
+  // Integral row made_ + 1 from the image's row made_ (row 0 is zeros, and
+  // so is every row's first column).
+  void makeRow() {
+    const int y = made_++;
+    for (int x = 0; x < width_; ++x) {
+      std::fill(v_.begin(), v_.end(), 0.0);
+      values_(static_cast<std::size_t>(y) * width_ + x, v_.data());
+      for (int k = 0; k < count_; ++k)
+        at(x + 1, y + 1, k) = v_[k] + at(x + 1, y, k) + at(x, y + 1, k) - at(x, y, k);
+    }
   }
-  double at(int x, int y, int k) const {
-    return integral_[(static_cast<std::size_t>(y) * (width_ + 1) + x) * count_ + k];
+  double& at(int x, int y, int k) { return integral_[index(x, y, k)]; }
+  double at(int x, int y, int k) const { return integral_[index(x, y, k)]; }
+  std::size_t index(int x, int y, int k) const {
+    return (static_cast<std::size_t>(y % rows_) * (width_ + 1) + x) * count_ + k;
   }
 
-  int width_, height_, count_;
+  int width_, height_, count_, r_, rows_;
+  int made_ = 0;  // integral rows made after row 0
+  Values values_;
   std::vector<double> integral_;
+  std::vector<double> v_;
 };
 
 // Per pixel, the RMS over a (2r+1)^2 box of the frame's noise residual (mean
@@ -124,7 +137,7 @@ class BoxSums {
 // errors, and so their differences, are larger.
 std::vector<float> localNoise(const Image& residual, int r) {
   const int w = residual.width, h = residual.height, channels = residual.channels;
-  const BoxSums sums(w, h, 1, [&](std::size_t i, double* v) {
+  BoxSums sums(w, h, 1, r, [&](std::size_t i, double* v) {
     double e = 0.0;
     for (int c = 0; c < channels; ++c) e += std::pow(residual.pixels[i * channels + c], 2);
     v[0] = e / channels;
@@ -132,7 +145,7 @@ std::vector<float> localNoise(const Image& residual, int r) {
   std::vector<float> out(residual.pixelCount());
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const BoxSums::Box box = sums.box(x, y, r);
+      const auto box = sums.box(x, y);
       out[y * w + x] = static_cast<float>(std::sqrt(sums.sum(box, 0) / box.pixels()));
     }
   return out;
@@ -146,7 +159,7 @@ std::vector<float> lightChange(const Image& current, const Image& moved, const I
                                const Image& currentResidual, const Image& movedResidual, int r) {
   const int w = current.width, h = current.height, channels = current.channels;
   // Over trusted pixels: count, difference, and the two residuals' squares.
-  const BoxSums sums(w, h, 3, [&](std::size_t i, double* v) {
+  BoxSums sums(w, h, 3, r, [&](std::size_t i, double* v) {
     if (trust.pixels[i] <= 0.0f) return;
     v[0] = 1.0;
     for (int c = 0; c < channels; ++c) {
@@ -159,7 +172,7 @@ std::vector<float> lightChange(const Image& current, const Image& moved, const I
   std::vector<float> z(current.pixelCount(), 0.0f);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const BoxSums::Box box = sums.box(x, y, r);
+      const auto box = sums.box(x, y);
       const double n = sums.sum(box, 0), difference = sums.sum(box, 1), variance = sums.sum(box, 2);
       if (n < 1.0 || variance <= 0.0) continue;
       // The mean of n differences has variance sum(var) / n^2.
@@ -182,7 +195,7 @@ double trustedMean(const std::vector<float>& values, const Image& trust) {
 Image trustedBoxMean(const Image& image, const Image& trust, int r) {
   const int w = image.width, h = image.height, channels = image.channels;
   // Over trusted pixels: the values, then the count.
-  const BoxSums sums(w, h, channels + 1, [&](std::size_t i, double* v) {
+  BoxSums sums(w, h, channels + 1, r, [&](std::size_t i, double* v) {
     if (trust.pixels[i] <= 0.0f) return;
     for (int c = 0; c < channels; ++c) v[c] = image.pixels[i * channels + c];
     v[channels] = 1.0;
@@ -190,7 +203,7 @@ Image trustedBoxMean(const Image& image, const Image& trust, int r) {
   Image out(w, h, channels);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const BoxSums::Box box = sums.box(x, y, r);
+      const auto box = sums.box(x, y);
       const double count = sums.sum(box, channels);
       for (int c = 0; c < channels; ++c)
         out.at(x, y, c) = count > 0.0 ? static_cast<float>(sums.sum(box, c) / count) : -1.0f;
@@ -250,7 +263,7 @@ Image driftFactor(const Image& moved, const Image& own, const std::vector<double
                   double threshold, const std::vector<unsigned char>* where = nullptr) {
   const int w = own.width, h = own.height, channels = own.channels;
   // Over the pixels taken: the frame's values, the neighbour's, then the count.
-  const BoxSums sums(w, h, 2 * channels + 1, [&](std::size_t i, double* v) {
+  BoxSums sums(w, h, 2 * channels + 1, r, [&](std::size_t i, double* v) {
     if (weight[i] <= 0.0) return;
     for (int c = 0; c < channels; ++c)
       v[c] = own.pixels[i * channels + c], v[channels + c] = moved.pixels[i * channels + c];
@@ -261,7 +274,7 @@ Image driftFactor(const Image& moved, const Image& own, const std::vector<double
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       if (where && !(*where)[static_cast<std::size_t>(y) * w + x]) continue;
-      const BoxSums::Box box = sums.box(x, y, r);
+      const auto box = sums.box(x, y);
       const double count = sums.sum(box, 2 * channels);
       if (count <= 0.0) continue;  // nothing taken in the box
       double ownLight = 0.0, movedLight = 0.0;
@@ -367,7 +380,8 @@ struct Contribution {
   // Relit or drifted: the factor its result was brought to the frame's light by.
   Image relight;
   std::vector<unsigned char> drifted;  // drifted: where that factor changed it; else empty
-  std::vector<float> lightChange;  // the renders' test per pixel (standard errors); empty if relit
+  // The renders' test per pixel (standard errors), for the learned trust; else empty.
+  std::vector<float> lightChange;
   std::vector<double> weight;
   double spread = 0.0;      // of its differences from the frame's result, in local noise levels
   double fullSpread = 0.0;  // the same, not capped at maxSpread
@@ -445,11 +459,12 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
     out.resampling = std::move(plan);
     return out;
   }
-  out.lightChange = std::move(light);
   for (std::size_t i = 0; i < out.weight.size(); ++i)
-    out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - out.lightChange[i]) /
+    out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - light[i]) /
                                                      (options.lightHigh - options.lightLow),
                                                  0.0, 1.0);
+  if (options.learnedTrust || options.observeTrust)
+    out.lightChange = std::move(light);  // a feature
   out.resampling = std::move(plan);
   return out;
 }
@@ -551,14 +566,14 @@ std::vector<float> trustFeatures(const Centre& centre, const Contribution& k,
   std::vector<float> toMean = absoluteDifference(mapped, meanMapped);
   for (std::size_t i = 0; i < toOwn.size(); ++i)
     toOwn[i] /= centre.noise[i], toMean[i] /= centre.noise[i];
-  const BoxSums ownSums(w, h, 1, [&](std::size_t i, double* v) { v[0] = toOwn[i]; });
+  BoxSums ownSums(w, h, 1, 1, [&](std::size_t i, double* v) { v[0] = toOwn[i]; });
   const Image& positions = k.resampling.positions;
   std::vector<float> out(own.pixelCount() * kTrustFeatureCount, 0.0f);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * w + x;
       float* f = &out[i * kTrustFeatureCount];
-      const BoxSums::Box box = ownSums.box(x, y, 1);
+      const auto box = ownSums.box(x, y);
       const float* p = positions.pixel(x, y);
       const double moved = std::hypot(p[0] - x, p[1] - y);
       double brightness = 0.0;
