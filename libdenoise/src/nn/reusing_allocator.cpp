@@ -112,21 +112,17 @@ class ReusingCpuAllocator final : public c10::Allocator {
   bool inArena(const char* block) const { return base_ && block >= base_ && block < base_ + size_; }
 
   void* take(std::size_t bytes) {
-    char* block = nullptr;
-    if (bytes >= kMinCachedBlock && base_) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      block = carveArena(roundUp(bytes + kHeader, kHugePage));
-    }
-    if (block) return block + kHeader;
-    block = static_cast<char*>(bytes >= kHugePage ? allocHuge(bytes + kHeader)
-                                                  : c10::alloc_cpu(bytes + kHeader));
+    if (bytes >= kMinCachedBlock)
+      if (void* data = takeFromArena(bytes)) return data;
+    char* block = static_cast<char*>(bytes >= kHugePage ? allocHuge(bytes + kHeader)
+                                                        : c10::alloc_cpu(bytes + kHeader));
     *reinterpret_cast<std::size_t*>(block) = bytes + kHeader;
     return block + kHeader;
   }
 
  public:
-  // A block of at least `bytes` from the arena, for operator new; null where
-  // there is none (no arena, or full).
+  // A block of at least `bytes` from the arena (a tensor's, or operator
+  // new's); null where there is none (no arena, or full).
   void* takeFromArena(std::size_t bytes) {
     if (!base_) return nullptr;
     std::lock_guard<std::mutex> lock(mutex_);
