@@ -93,7 +93,9 @@ int run(Options o, int argc, char** argv) {
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const auto& [input, output] = jobs[j];
     const std::string name = input.empty() ? o.separateFiles.at("color") : input;
-    FrameBuffers frame = readInput(o, denoiser, input, name);
+    // A sequence's frame was read once already, as a neighbour, in the window.
+    FrameBuffers frame =
+        sequence ? sequence->frame(input, readFile) : readInput(o, denoiser, input, name);
     if (!ref.empty()) checkReferenceSize(o, ref, frame, name);
     if (o.verbose) {
       for (const auto& note : frame.notes) fmt::print(stderr, "dndenoise: {}: {}\n", name, note);

@@ -296,14 +296,23 @@ bool showsEnvironment(const Guides& guides, std::size_t pixel) {
 
 Image reprojectNearest(const Image& source, const Image& positions) {
   Image out(positions.width, positions.height, source.channels);
-  for (int y = 0; y < positions.height; ++y)
-    for (int x = 0; x < positions.width; ++x) {
-      const float qx = positions.at(x, y, 0), qy = positions.at(x, y, 1);
-      if (std::isnan(qx) || std::isnan(qy)) continue;
-      const float* from = source.pixel(nearest(qx, source.width), nearest(qy, source.height));
-      std::copy(from, from + source.channels, out.pixel(x, y));
-    }
+  reprojectNearestRows(source, positions, 0, positions.height, out);
   return out;
+}
+
+void reprojectNearestRows(const Image& source, const Image& positions, int rowBegin, int rowEnd,
+                          Image& out) {
+  for (int y = rowBegin; y < rowEnd; ++y)
+    for (int x = 0; x < positions.width; ++x) {
+      float* to = out.pixel(x, y);
+      const float qx = positions.at(x, y, 0), qy = positions.at(x, y, 1);
+      if (std::isnan(qx) || std::isnan(qy)) {
+        std::fill_n(to, source.channels, 0.0f);
+        continue;
+      }
+      const float* from = source.pixel(nearest(qx, source.width), nearest(qy, source.height));
+      std::copy(from, from + source.channels, to);
+    }
 }
 
 }  // namespace dn::motion

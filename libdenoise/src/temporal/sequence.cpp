@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <optional>
+#include <set>
 #include <stdexcept>
 
 #include "dn/io/frame_pattern.h"
@@ -17,9 +18,12 @@ namespace dn::temporal {
 // alone, its result. The buffers the model reads are dropped once denoised, so
 // a window of 1080p frames holds about 0.13 GB a frame, not the whole file.
 struct Sequence::Input {
-  FrameBuffers buffers;  // what the model reads, until denoised
-  WindowFrame frame;     // noisy, guides, motion; denoised
-  Image cleanAlbedo;     // the prefilter's, for denoising the frame's history
+  // What the model reads; once denoised, all but the colour, albedo, normal
+  // and depth, which `frame` holds (Sequence::frame puts them back).
+  FrameBuffers buffers;
+  std::set<std::string> heldInWindow;  // those of kHeldInWindow the frame had
+  WindowFrame frame;                   // noisy, guides, motion; denoised
+  Image cleanAlbedo;                   // the prefilter's, for denoising the frame's history
   Image cleanNormal;
   std::optional<Companions> companions;  // once made
   std::optional<DeviceFrame> onDevice;   // SequenceSettings::filterDevice: the frame there
@@ -66,6 +70,15 @@ FrameBuffers withHistory(const FrameBuffers& frame, Image history, const Image& 
     out.auxPrefiltered = true;
   }
   return out;
+}
+
+// The model's buffers a window frame holds as its noisy render and guides.
+const char* const kHeldInWindow[] = {"color", "albedo", "normal", "depth"};
+
+// Drops the buffers the window frame holds too (a denoised frame's buffers
+// are only read again to hand the frame back, by Sequence::frame).
+void dropHeldTwice(FrameBuffers& buffers) {
+  for (const char* name : kHeldInWindow) buffers.buffers.erase(name);
 }
 
 // FrameBuffers::extra's names of the motion channels' groups (MotionChannels::groups).
@@ -155,6 +168,12 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   // A given frame is denoised straight from the caller's buffers.
   if (!given) entry->buffers = read(path, extraChannels(path));
   const FrameBuffers& frame = given ? *given : entry->buffers;
+  for (const char* name : kHeldInWindow)
+    if (frame.has(name)) entry->heldInWindow.insert(name);
+  if (given) {  // kept for Sequence::frame, but for what the window holds
+    entry->buffers = *given;
+    dropHeldTwice(entry->buffers);
+  }
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = guidesOf(frame, path, settings_.read);
   if (settings_.viewDependentShare)
@@ -165,6 +184,21 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   return entry;
 }
 
+FrameBuffers Sequence::frame(const std::string& file, const Read& read) {
+  const auto number = numbers_.find(file);
+  if (number == numbers_.end())
+    throw std::invalid_argument(file + ": not one of the sequence's frames");
+  const auto held = input(number->second, nullptr, read);
+  if (!held) throw std::invalid_argument(file + ": no such file");
+  FrameBuffers out = held->buffers;
+  const motion::Guides& guides = held->frame.guides;
+  const Image* images[] = {&held->frame.noisy, &guides.albedo, &guides.normal, &guides.depth};
+  for (std::size_t k = 0; k < std::size(kHeldInWindow); ++k)
+    if (held->heldInWindow.count(kHeldInWindow[k]))
+      out.buffers.emplace(kHeldInWindow[k], *images[k]);
+  return out;
+}
+
 std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameBuffers* given,
                                                         const Read& read, const Denoise& denoise) {
   if (auto it = estimates_.find(number); it != estimates_.end()) return it->second;
@@ -172,7 +206,7 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   if (!self) return nullptr;
   auto result =
       std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
-  self->buffers = FrameBuffers();
+  dropHeldTwice(self->buffers);
   self->frame.denoised = std::move(result->color);  // the filter's input, held once
   self->cleanAlbedo = std::move(result->cleanAlbedo);
   self->cleanNormal = std::move(result->cleanNormal);

@@ -16,6 +16,37 @@ namespace dn::temporal {
 
 namespace {
 
+// Runs task(0 .. count-1) on up to `threads` threads; the first exception
+// thrown is rethrown here, after every thread has stopped.
+void forEach(std::size_t count, int threads, const std::function<void(std::size_t)>& task) {
+  std::atomic<std::size_t> next{0};
+  std::exception_ptr failure;
+  std::mutex failureMutex;
+  auto worker = [&] {
+    try {
+      for (std::size_t i = next++; i < count; i = next++) task(i);
+    } catch (...) {
+      next = count;  // the others stop after their current task
+      std::lock_guard<std::mutex> lock(failureMutex);
+      if (!failure) failure = std::current_exception();
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t)
+    pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+  if (failure) std::rethrow_exception(failure);
+}
+
+// Runs range(begin, end) over bands of [0, count) on up to `threads` threads.
+void forBands(std::size_t count, int threads,
+              const std::function<void(std::size_t, std::size_t)>& range) {
+  const std::size_t bands = std::clamp<std::size_t>(threads, 1, std::max<std::size_t>(count, 1));
+  forEach(bands, threads,
+          [&](std::size_t b) { range(b * count / bands, (b + 1) * count / bands); });
+}
+
 // Reinhard's x / (1 + x) after `scale`, OIDN's autoexposure of the frame's
 // result: differences then weigh as they show, in dark and bright frames alike.
 // (Not the mean: a visible sun can hold most of a frame's mean, and darken
@@ -483,27 +514,32 @@ struct Weighted {
   const std::vector<double>* weight;
 };
 
-WeightedMean weightedMean(const Image& own, const std::vector<Weighted>& others) {
+// On `threads` threads over bands of pixels, each pixel summed in the same order.
+WeightedMean weightedMean(const Image& own, const std::vector<Weighted>& others, int threads = 1) {
   const int channels = own.channels;
   WeightedMean out{{own.pixels.begin(), own.pixels.end()},
                    std::vector<double>(own.pixelCount(), 1.0)};
-  for (const Weighted& k : others) {
-    const std::vector<double>& weight = *k.weight;
-    for (std::size_t i = 0; i < weight.size(); ++i) {
-      if (weight[i] <= 0.0) continue;
-      out.weight[i] += weight[i];
-      for (int ch = 0; ch < channels; ++ch)
-        out.value[channels * i + ch] += weight[i] * k.image->pixels[channels * i + ch];
+  forBands(own.pixelCount(), threads, [&](std::size_t begin, std::size_t end) {
+    for (const Weighted& k : others) {
+      const std::vector<double>& weight = *k.weight;  // empty: left out whole
+      for (std::size_t i = begin; i < std::min(end, weight.size()); ++i) {
+        if (weight[i] <= 0.0) continue;
+        out.weight[i] += weight[i];
+        for (int ch = 0; ch < channels; ++ch)
+          out.value[channels * i + ch] += weight[i] * k.image->pixels[channels * i + ch];
+      }
     }
-  }
-  for (std::size_t i = 0; i < out.value.size(); ++i) out.value[i] /= out.weight[i / channels];
+    for (std::size_t i = begin * channels; i < end * channels; ++i)
+      out.value[i] /= out.weight[i / channels];
+  });
   return out;
 }
 
-WeightedMean weightedMean(const Image& own, const std::vector<Contribution>& contributions) {
+WeightedMean weightedMean(const Image& own, const std::vector<Contribution>& contributions,
+                          int threads) {
   std::vector<Weighted> others;
   for (const Contribution& k : contributions) others.push_back({&k.image, &k.weight});
-  return weightedMean(own, others);
+  return weightedMean(own, others, threads);
 }
 
 Image toImage(const std::vector<double>& values, const Image& shape) {
@@ -516,8 +552,8 @@ Image toImage(const std::vector<double>& values, const Image& shape) {
 // What the colour test compares each neighbour with: the frame's result
 // blended with the mean of the frame and every neighbour the other tests kept.
 Image colourReference(const Image& own, const std::vector<Contribution>& contributions,
-                      double blend) {
-  const std::vector<double> mean = weightedMean(own, contributions).value;
+                      double blend, int threads) {
+  const std::vector<double> mean = weightedMean(own, contributions, threads).value;
   Image out = own;
   for (std::size_t i = 0; i < out.pixels.size(); ++i)
     out.pixels[i] = static_cast<float>((1.0 - blend) * own.pixels[i] + blend * mean[i]);
@@ -542,7 +578,7 @@ void applyColourTest(Contribution& k, const Image& referenceMapped, const Centre
 
 // The frame's result and every kept neighbour's, weighted by the guides'
 // trust alone, tonemapped: what the learned trust compares each with.
-Image guideMean(const Centre& centre, const std::vector<Contribution>& contributions) {
+Image guideMean(const Centre& centre, const std::vector<Contribution>& contributions, int threads) {
   std::vector<std::vector<double>> trust;
   std::vector<Weighted> others;
   trust.reserve(contributions.size());
@@ -553,7 +589,7 @@ Image guideMean(const Centre& centre, const std::vector<Contribution>& contribut
     others.push_back({&k.image, &trust.back()});
   }
   const Image& own = centre.frame->denoised;
-  return tonemapped(toImage(weightedMean(own, others).value, own), centre.scale);
+  return tonemapped(toImage(weightedMean(own, others, threads).value, own), centre.scale);
 }
 
 // Per pixel, what the learned trust sees of neighbour `k` (learned_trust.h).
@@ -627,29 +663,6 @@ void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
   }
 }
 
-// Runs task(0 .. count-1) on up to `threads` threads; the first exception
-// thrown is rethrown here, after every thread has stopped.
-void forEach(std::size_t count, int threads, const std::function<void(std::size_t)>& task) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failureMutex;
-  auto worker = [&] {
-    try {
-      for (std::size_t i = next++; i < count; i = next++) task(i);
-    } catch (...) {
-      next = count;  // the others stop after their current task
-      std::lock_guard<std::mutex> lock(failureMutex);
-      if (!failure) failure = std::current_exception();
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t)
-    pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
-  if (failure) std::rethrow_exception(failure);
-}
-
 // The frame's noisy render and its neighbours', each neighbour's brought in
 // at the nearest pixel (resampling would correlate the noise, which the
 // network then leaves as blotches) with the weights its result got, and a
@@ -657,22 +670,33 @@ void forEach(std::size_t count, int threads, const std::function<void(std::size_
 // effective number of frames per pixel, (sum w)^2 / sum w^2: the accumulated
 // render's variance is the frame's over that.
 void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowFrame*>& frames,
-                     const std::vector<Contribution>& contributions, TemporalResult& result) {
-  const std::size_t n = current.noisy.pixelCount();
-  std::vector<double> sum(current.noisy.pixels.begin(), current.noisy.pixels.end());
+                     const std::vector<Contribution>& contributions, int threads,
+                     TemporalResult& result) {
+  const Image& own = current.noisy;
+  const std::size_t n = own.pixelCount();
+  std::vector<double> sum(own.pixels.begin(), own.pixels.end());
   std::vector<double> weight(n, 1.0), squares(n, 1.0);
-  for (std::size_t k = 0; k < contributions.size(); ++k) {
-    const Contribution& c = contributions[k];
-    if (c.weight.empty()) continue;
-    Image moved = motion::reprojectNearest(frames[k]->noisy, c.resampling.positions);
-    if (!c.relight.empty()) moved = scaled(std::move(moved), c.relight);
-    for (std::size_t i = 0; i < n; ++i) {
-      const double w = c.weight[i];
-      if (w <= 0.0) continue;
-      weight[i] += w, squares[i] += w * w;
-      for (int ch = 0; ch < 3; ++ch) sum[3 * i + ch] += w * moved.pixels[3 * i + ch];
+  // Over bands of rows, each pixel summed in the neighbours' order; `moved`
+  // holds one neighbour's render at a time in each band's rows.
+  Image moved(own.width, own.height, 3);
+  forBands(own.height, threads, [&](std::size_t y0, std::size_t y1) {
+    for (std::size_t k = 0; k < contributions.size(); ++k) {
+      const Contribution& c = contributions[k];
+      if (c.weight.empty()) continue;
+      motion::reprojectNearestRows(frames[k]->noisy, c.resampling.positions, int(y0), int(y1),
+                                   moved);
+      for (std::size_t i = y0 * own.width; i < y1 * own.width; ++i) {
+        const double w = c.weight[i];
+        if (w <= 0.0) continue;
+        weight[i] += w, squares[i] += w * w;
+        for (int ch = 0; ch < 3; ++ch) {
+          float value = moved.pixels[3 * i + ch];
+          if (!c.relight.empty()) value *= c.relight.pixels[3 * i + ch];
+          sum[3 * i + ch] += w * value;
+        }
+      }
     }
-  }
+  });
   result.history = Image(current.noisy.width, current.noisy.height, 3);
   result.historyFrames = Image(current.noisy.width, current.noisy.height, 1);
   double total = 0.0;
@@ -768,7 +792,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   // The learned trust's view of each neighbour, where it or an observer needs it.
   std::vector<std::vector<float>> features(contributions.size());
   if (options.learnedTrust || options.observeTrust) {
-    const Image meanMapped = guideMean(c, contributions);
+    const Image meanMapped = guideMean(c, contributions, options.threads);
     forEach(contributions.size(), options.threads, [&](std::size_t n) {
       if (contributions[n].weight.empty()) return;
       const long distance = std::labs(long(neighbours[n].index) - long(centre));
@@ -777,7 +801,8 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     });
   }
   const Image referenceMapped = tonemapped(
-      colourReference(current.denoised, contributions, options.colourReference), c.scale);
+      colourReference(current.denoised, contributions, options.colourReference, options.threads),
+      c.scale);
   forEach(contributions.size(), options.threads, [&](std::size_t n) {
     applyColourTest(contributions[n], referenceMapped, c, options);
     if (options.learnedTrust && !features[n].empty())
@@ -798,7 +823,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   forEach(contributions.size(), options.threads,
           [&](std::size_t n) { applyDrift(contributions[n], current.denoised, options); });
 
-  const WeightedMean mean = weightedMean(current.denoised, contributions);
+  const WeightedMean mean = weightedMean(current.denoised, contributions, options.threads);
   TemporalResult result;
   result.color = toImage(mean.value, current.denoised);
   result.stats.neighbours = static_cast<int>(neighbours.size());
@@ -814,7 +839,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   if (options.accumulatedShare > 0.0) {
     std::vector<const WindowFrame*> frames;
     for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
-    accumulateNoisy(current, frames, contributions, result);
+    accumulateNoisy(current, frames, contributions, options.threads, result);
     result.pastHistories = pastHistoriesOf(contributions, c);
   }
   double share = 0.0;
@@ -919,7 +944,7 @@ Image historyMean(const Image& own, const TemporalResult& result, const Temporal
           (options.lightHigh - d[i] / error) / (options.lightHigh - options.lightLow), 0.0, 1.0);
     }
   }
-  const std::vector<double> mean = weightedMean(own, histories).value;
+  const std::vector<double> mean = weightedMean(own, histories, options.threads).value;
   Image out = own;
   std::transform(mean.begin(), mean.end(), out.pixels.begin(),
                  [](double v) { return static_cast<float>(v); });

@@ -87,6 +87,10 @@ Image resample(const Resampling& plan, const Image& source);
 // Nearest-pixel resampling (no filtering: noise stays uncorrelated), for the
 // repeated-noise test. Zeros where positions are NaN.
 Image reprojectNearest(const Image& source, const Image& positions);
+// The same into rows [rowBegin, rowEnd) of `out` (positions' size, source's
+// channels), the other rows untouched: for callers that split the rows among threads.
+void reprojectNearestRows(const Image& source, const Image& positions, int rowBegin, int rowEnd,
+                          Image& out);
 
 // Whether `pixel` shows no surface, only the environment: a depth guide of 0
 // (Cycles' Denoising Depth, Mitsuba's) or beyond 1e9 (Cycles' Z pass writes

@@ -114,6 +114,12 @@ class Sequence {
   DenoiseResult denoise(const std::string& file, const Denoiser& denoiser,
                         const DenoiseOptions& options);
 
+  // The buffers of `file` (one of the planned files) as `read` gives them:
+  // put back together from what the window holds where it holds the frame,
+  // else read (and then held), so that each file is decoded once. Throws
+  // std::invalid_argument for a file not planned, or gone.
+  FrameBuffers frame(const std::string& file, const Read& read);
+
   // What the sequence asks Read for beside the buffers of file `path`: the
   // depth guide, the motion vectors, the view-dependent passes.
   ChannelGroups extraChannels(const std::string& path) const;
