@@ -32,6 +32,9 @@ struct Sequence::Input {
   // again with -n keeps them), and only a frame's own view-dependent share is
   // used: 62 MB less a 1080p frame.
   void dropOwnUse() { cleanAlbedo = cleanNormal = frame.viewDependent = Image(); }
+
+  // The frame's buffers as read, put back together without decoding the file again.
+  FrameBuffers readAgain() const;
 };
 
 namespace {
@@ -159,6 +162,15 @@ std::optional<motion::MotionField> Sequence::motionOf(int number, const std::str
   return motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer);
 }
 
+FrameBuffers Sequence::Input::readAgain() const {
+  FrameBuffers out = buffers;
+  const Image* images[] = {&frame.noisy, &frame.guides.albedo, &frame.guides.normal,
+                           &frame.guides.depth};
+  for (std::size_t k = 0; k < std::size(kHeldInWindow); ++k)
+    if (heldInWindow.count(kHeldInWindow[k])) out.buffers.emplace(kHeldInWindow[k], *images[k]);
+  return out;
+}
+
 std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers* given,
                                                  const Read& read) {
   if (auto it = inputs_.find(number); it != inputs_.end()) return it->second;
@@ -190,13 +202,7 @@ FrameBuffers Sequence::frame(const std::string& file, const Read& read) {
     throw std::invalid_argument(file + ": not one of the sequence's frames");
   const auto held = input(number->second, nullptr, read);
   if (!held) throw std::invalid_argument(file + ": no such file");
-  FrameBuffers out = held->buffers;
-  const motion::Guides& guides = held->frame.guides;
-  const Image* images[] = {&held->frame.noisy, &guides.albedo, &guides.normal, &guides.depth};
-  for (std::size_t k = 0; k < std::size(kHeldInWindow); ++k)
-    if (held->heldInWindow.count(kHeldInWindow[k]))
-      out.buffers.emplace(kHeldInWindow[k], *images[k]);
-  return out;
+  return held->readAgain();
 }
 
 std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameBuffers* given,
@@ -286,32 +292,31 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
     Filtered earlier = filtered(m, nullptr, read, denoise);
     if (!earlier.alone) continue;
     earlier.result.weights = FilterWeights();  // only the passes of the frames asked for use them
-    denoisedHistory(m, read(fileOf(m), {}), earlier.result, denoise);
+    denoisedHistory(m, past->readAgain(), earlier.result, denoise);
   }
 }
 
-const Companions& Sequence::companionsOf(int number, const FrameBuffers* given, const Read& read,
+const Companions& Sequence::companionsOf(int number, const FrameBuffers* given,
                                          const CompanionMaker& make) {
   Input& entry = *inputs_.at(number);
   if (!entry.companions) {
     const std::string path = fileOf(number);
-    entry.companions = make.make(path, given ? *given : read(path, {}));
+    entry.companions = make.make(path, given ? *given : entry.readAgain());
   }
   return *entry.companions;
 }
 
 Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const FrameBuffers& frame,
                                                           const FilterWeights& weights,
-                                                          const Read& read,
                                                           const CompanionMaker& make,
                                                           bool accumulate) {
   // Window index k is frame number - radius + k; only the frames the colour
   // took something from are needed.
   const int first = number - static_cast<int>(weights.centre);
   std::map<std::size_t, const Companions*> made;
-  made[weights.centre] = &companionsOf(number, &frame, read, make);
+  made[weights.centre] = &companionsOf(number, &frame, make);
   for (const NeighbourWeights& nb : weights.neighbours)
-    made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), nullptr, read, make);
+    made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), nullptr, make);
   const std::size_t size = made.rbegin()->first + 1;
   FilteredCompanions out;
   for (const auto& [name, own] : *made.at(weights.centre)) {
@@ -367,8 +372,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   FilteredCompanions passes;
   if (companions.make)
     passes = filteredCompanions(
-        n, frame, self.device ? self.device->weights.toHost() : self.result.weights, read,
-        companions,
+        n, frame, self.device ? self.device->weights.toHost() : self.result.weights, companions,
         share > 0.0 && companions.denoiseAccumulated && self.result.stats.accumulatedFrames > 1.0);
   self.result.weights = FilterWeights();
   DenoiseResult& result = out.result;

@@ -161,17 +161,17 @@ class Sequence {
   // Makes the denoised histories of the frames within the window before `number`
   // that lack one.
   void makePastHistories(int number, const Read& read, const Denoise& denoise);
-  // Frame `number`'s companions, made by `make` (from `given`, or read) if not yet.
-  const Companions& companionsOf(int number, const FrameBuffers* given, const Read& read,
-                                 const CompanionMaker& make);
+  // Frame `number`'s companions, made by `make` (from `given`, or the frame
+  // as the window holds it) if not yet.
+  const Companions& companionsOf(int number, const FrameBuffers* given, const CompanionMaker& make);
   // The companions filtered over the window, and those with a render
   // accumulated (by name).
   struct FilteredCompanions {
     std::map<std::string, Image> filtered, accumulated;
   };
   FilteredCompanions filteredCompanions(int number, const FrameBuffers& frame,
-                                        const FilterWeights& weights, const Read& read,
-                                        const CompanionMaker& make, bool accumulate);
+                                        const FilterWeights& weights, const CompanionMaker& make,
+                                        bool accumulate);
   // The frame on settings_.filterDevice, copied there on first use.
   const DeviceFrame& onDevice(Input& input) const;
   // The filtered colour blended with the accumulated render denoised (and
