@@ -14,6 +14,9 @@ namespace fs = std::filesystem;
 
 namespace dn::temporal {
 
+// The model's buffers a window frame holds as its noisy render and guides.
+const char* const kHeldInWindow[] = {"color", "albedo", "normal", "depth"};
+
 // A frame as read: its guides and motion, its noisy colour and, once denoised
 // alone, its result. The buffers the model reads are dropped once denoised, so
 // a window of 1080p frames holds about 0.13 GB a frame, not the whole file.
@@ -21,7 +24,7 @@ struct Sequence::Input {
   // What the model reads; once denoised, all but the colour, albedo, normal
   // and depth, which `frame` holds (Sequence::frame puts them back).
   FrameBuffers buffers;
-  std::set<std::string> heldInWindow;  // those of kHeldInWindow the frame had
+  std::set<std::string> heldInWindow;  // those of kHeldInWindow `frame` holds as read
   WindowFrame frame;                   // noisy, guides, motion; denoised
   Image cleanAlbedo;                   // the prefilter's, for denoising the frame's history
   Image cleanNormal;
@@ -35,6 +38,10 @@ struct Sequence::Input {
 
   // The frame's buffers as read, put back together without decoding the file again.
   FrameBuffers readAgain() const;
+  // Drops the buffers the window frame holds too (only readAgain needs them).
+  void dropHeld() {
+    for (const auto& name : heldInWindow) buffers.buffers.erase(name);
+  }
 };
 
 namespace {
@@ -73,15 +80,6 @@ FrameBuffers withHistory(const FrameBuffers& frame, Image history, const Image& 
     out.auxPrefiltered = true;
   }
   return out;
-}
-
-// The model's buffers a window frame holds as its noisy render and guides.
-const char* const kHeldInWindow[] = {"color", "albedo", "normal", "depth"};
-
-// Drops the buffers the window frame holds too (a denoised frame's buffers
-// are only read again to hand the frame back, by Sequence::frame).
-void dropHeldTwice(FrameBuffers& buffers) {
-  for (const char* name : kHeldInWindow) buffers.buffers.erase(name);
 }
 
 // FrameBuffers::extra's names of the motion channels' groups (MotionChannels::groups).
@@ -180,17 +178,20 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   // A given frame is denoised straight from the caller's buffers.
   if (!given) entry->buffers = read(path, extraChannels(path));
   const FrameBuffers& frame = given ? *given : entry->buffers;
-  for (const char* name : kHeldInWindow)
-    if (frame.has(name)) entry->heldInWindow.insert(name);
-  if (given) {  // kept for Sequence::frame, but for what the window holds
-    entry->buffers = *given;
-    dropHeldTwice(entry->buffers);
-  }
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = guidesOf(frame, path, settings_.read);
   if (settings_.viewDependentShare)
     entry->frame.viewDependent = settings_.viewDependentShare(path, frame);
   if (auto field = motionOf(number, path, frame)) entry->frame.motion = std::move(*field);
+  const Image* held[] = {&entry->frame.noisy, &entry->frame.guides.albedo,
+                         &entry->frame.guides.normal, &entry->frame.guides.depth};
+  for (std::size_t k = 0; k < std::size(kHeldInWindow); ++k)
+    if (frame.has(kHeldInWindow[k]) && frame.get(kHeldInWindow[k]).pixels == held[k]->pixels)
+      entry->heldInWindow.insert(kHeldInWindow[k]);
+  if (given) {  // kept for Sequence::frame, but for what the window holds
+    entry->buffers = *given;
+    entry->dropHeld();
+  }
   entry->buffers.extra.clear();
   inputs_[number] = entry;
   return entry;
@@ -212,7 +213,7 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   if (!self) return nullptr;
   auto result =
       std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
-  dropHeldTwice(self->buffers);
+  self->dropHeld();
   self->frame.denoised = std::move(result->color);  // the filter's input, held once
   self->cleanAlbedo = std::move(result->cleanAlbedo);
   self->cleanNormal = std::move(result->cleanNormal);
