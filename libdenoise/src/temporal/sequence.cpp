@@ -1,6 +1,7 @@
 #include "dn/temporal/sequence.h"
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <optional>
@@ -36,6 +37,10 @@ struct Sequence::Input {
   // used: 62 MB less a 1080p frame.
   void dropOwnUse() { cleanAlbedo = cleanNormal = frame.viewDependent = Image(); }
 
+  // The window's copies of the buffers of kHeldInWindow, in its order.
+  std::array<const Image*, std::size(kHeldInWindow)> windowCopies() const {
+    return {&frame.noisy, &frame.guides.albedo, &frame.guides.normal, &frame.guides.depth};
+  }
   // The frame's buffers as read, put back together without decoding the file again.
   FrameBuffers readAgain() const;
   // Drops the buffers the window frame holds too (only readAgain needs them).
@@ -162,10 +167,9 @@ std::optional<motion::MotionField> Sequence::motionOf(int number, const std::str
 
 FrameBuffers Sequence::Input::readAgain() const {
   FrameBuffers out = buffers;
-  const Image* images[] = {&frame.noisy, &frame.guides.albedo, &frame.guides.normal,
-                           &frame.guides.depth};
-  for (std::size_t k = 0; k < std::size(kHeldInWindow); ++k)
-    if (heldInWindow.count(kHeldInWindow[k])) out.buffers.emplace(kHeldInWindow[k], *images[k]);
+  const auto copies = windowCopies();
+  for (std::size_t k = 0; k < copies.size(); ++k)
+    if (heldInWindow.count(kHeldInWindow[k])) out.buffers.emplace(kHeldInWindow[k], *copies[k]);
   return out;
 }
 
@@ -183,10 +187,9 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   if (settings_.viewDependentShare)
     entry->frame.viewDependent = settings_.viewDependentShare(path, frame);
   if (auto field = motionOf(number, path, frame)) entry->frame.motion = std::move(*field);
-  const Image* held[] = {&entry->frame.noisy, &entry->frame.guides.albedo,
-                         &entry->frame.guides.normal, &entry->frame.guides.depth};
-  for (std::size_t k = 0; k < std::size(kHeldInWindow); ++k)
-    if (frame.has(kHeldInWindow[k]) && frame.get(kHeldInWindow[k]).pixels == held[k]->pixels)
+  const auto copies = entry->windowCopies();
+  for (std::size_t k = 0; k < copies.size(); ++k)
+    if (frame.has(kHeldInWindow[k]) && frame.get(kHeldInWindow[k]).pixels == copies[k]->pixels)
       entry->heldInWindow.insert(kHeldInWindow[k]);
   if (given) {  // kept for Sequence::frame, but for what the window holds
     entry->buffers = *given;

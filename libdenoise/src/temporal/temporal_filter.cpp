@@ -522,7 +522,8 @@ WeightedMean weightedMean(const Image& own, const std::vector<Weighted>& others,
   forBands(own.pixelCount(), threads, [&](std::size_t begin, std::size_t end) {
     for (const Weighted& k : others) {
       const std::vector<double>& weight = *k.weight;  // empty: left out whole
-      for (std::size_t i = begin; i < std::min(end, weight.size()); ++i) {
+      const std::size_t stop = std::min(end, weight.size());
+      for (std::size_t i = begin; i < stop; ++i) {
         if (weight[i] <= 0.0) continue;
         out.weight[i] += weight[i];
         for (int ch = 0; ch < channels; ++ch)
