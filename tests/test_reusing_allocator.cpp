@@ -1,7 +1,8 @@
 // The CPU allocator that keeps freed large blocks for reuse: a freed block
 // comes back for its size or serves smaller ones, pieces merge again when
-// freed, a larger request grows the cached range at the top, the cache stays
-// within its cap and under the high-water mark of the memory in use, small
+// freed, a larger request grows the cached range at the top (other cached
+// memory going back first), the cache stays within its cap and under the
+// high-water mark of the memory in use, small
 // blocks are left to malloc, tensors made through it hold their values, and
 // asked to, operator new takes its large blocks from the same cache.
 #include <vector>
@@ -93,6 +94,22 @@ TEST_CASE("a request larger than every cached range grows the one at the top") {
   // Kept in memory, not given back and zeroed again: the old values are there.
   CHECK(grown[0].item<float>() == 7.0f);
   CHECK(grown[int64_t(8 * kMiB / sizeof(float)) - 1].item<float>() == 7.0f);
+}
+
+TEST_CASE("growing the range at the top gives other cached memory back first") {
+  emptyCache(std::size_t(4) << 30);
+  // Requests that take exactly `mib` MiB of the arena with the block's header.
+  auto block = [](std::size_t mib) { return floats(mib * kMiB - 64); };
+  torch::Tensor low = block(256), kept = block(8), top = block(256);
+  const char* topAddress = address(top);
+  low = top = torch::Tensor();
+  CHECK(reusingCpuAllocatorCachedBytes() == 512 * kMiB);
+  // No cached range holds 384 MiB: the top one grows by 128 MiB, and as much
+  // of the low one goes back, so that what is resident stays at the 520 MiB
+  // the three blocks took; the low one's 256 MiB would otherwise stay too.
+  torch::Tensor grown = block(384);
+  CHECK(address(grown) == topAddress);
+  CHECK(reusingCpuAllocatorCachedBytes() == 128 * kMiB);
 }
 
 TEST_CASE("tensors through the allocator compute as usual") {

@@ -167,12 +167,18 @@ class ReusingCpuAllocator final : public c10::Allocator {
 
   // The cached range that ends at the top, grown by fresh memory above it to
   // `length`: only the growth is zeroed, where a fresh block would be whole.
+  // The other cached ranges make room for the growth first, as for any fresh
+  // memory: a sequence's window, freed and taken in other sizes than the
+  // networks' activations, otherwise kept 0.7 GB of cache resident and unused
+  // at a 1080p shot's peak.
   std::optional<std::size_t> extendTopRange(std::size_t length) {
     if (free_.empty()) return std::nullopt;
-    const auto& [offset, range] = *free_.rbegin();
-    if (!range.cached || offset + range.length != top_ || offset + length > size_)
+    const auto [start, range] = *free_.rbegin();
+    if (!range.cached || start + range.length != top_ || start + length > size_)
       return std::nullopt;
-    const std::size_t start = offset;
+    const std::size_t growth = length - range.length;
+    while (live_ + cached_ + growth > highWater_ && cached_ > range.length)
+      dropCached(live_ + cached_ + growth - highWater_, start);
     removeFree(start);
     top_ = start + length;
     return start;
@@ -225,10 +231,10 @@ class ReusingCpuAllocator final : public c10::Allocator {
   }
 
   // Gives up to `bytes` (whole huge pages) of memory back to the kernel from
-  // the end of the highest cached range, as a heap trims its top: the cache
-  // left stays in long ranges low in the arena.
-  void dropCached(std::size_t bytes) {
-    auto highest = free_.rbegin();
+  // the end of the highest cached range starting below `below`, as a heap
+  // trims its top: the cache left stays in long ranges low in the arena.
+  void dropCached(std::size_t bytes, std::size_t below = SIZE_MAX) {
+    auto highest = std::make_reverse_iterator(free_.lower_bound(below));
     while (!highest->second.cached) ++highest;
     const std::size_t offset = highest->first, length = highest->second.length;
     const std::size_t dropped = std::min(length, roundUp(bytes, kHugePage));

@@ -16,9 +16,11 @@ namespace dn {
 // made before keep their own deleter). At most `maxCachedBytes` of freed
 // memory is kept; past that the highest goes back to the system. A request
 // that no cached range holds grows the cached range at the top of the arena,
-// where there is one, so that only the growth is fresh; else it gives cached
-// memory back first where fresh memory would take the large blocks in use and
-// cached past their high-water mark. Blocks under 1 MiB are left to malloc.
+// where there is one, so that only the growth is fresh. Either way, where the
+// fresh memory would take the large blocks in use and cached past their
+// high-water mark, other cached memory goes back first: what is resident
+// stays within the most the blocks in use ever needed. Blocks under 1 MiB are
+// left to malloc.
 // Calling it again changes the cap.
 void useReusingCpuAllocator(std::size_t maxCachedBytes);
 
