@@ -2,9 +2,9 @@
 // comes back for its size or serves smaller ones, pieces merge again when
 // freed, a larger request grows the cached range at the top (other cached
 // memory going back first), the cache stays within its cap and under the
-// high-water mark of the memory in use, small
-// blocks are left to malloc, tensors made through it hold their values, and
-// asked to, operator new takes its large blocks from the same cache.
+// high-water mark of the memory in use, small blocks are left to malloc,
+// tensors made through it hold their values, and asked to, operator new
+// takes its large blocks from the same cache.
 #include <vector>
 
 #include "doctest_torch.h"
