@@ -226,7 +226,7 @@ dn::Image denoisedHistory(const Frame& f, dn::Image accumulated, double accumula
   Held& self = f.window.at(f.n);
   return accumulatedFrames > 1.0
              ? f.denoiser.denoise(withHistory(self, std::move(accumulated)), f.options).color
-             : self.frame.denoised;
+             : self.frame.denoised.toImage();
 }
 
 Step onCpu(const Frame& f) {
@@ -242,7 +242,7 @@ Step onCpu(const Frame& f) {
   step.history = secondsSince(start);
   start = std::chrono::steady_clock::now();
   step.color = dn::temporal::blendWithHistory(
-      result.color, dn::temporal::historyMean(self.frame.history, result, f.filter),
+      result.color, dn::temporal::historyMean(self.frame.history.floats(), result, f.filter),
       f.filter.accumulatedShare);
   step.filter += secondsSince(start);
   return step;
@@ -263,13 +263,13 @@ Step onDevice(const Frame& f, const torch::Device& device) {
   const dn::temporal::DeviceTemporalResult result =
       dn::temporal::filterFrame(frames, f.radius, f.filter);
   Held& self = f.window.at(f.n);
-  const int w = self.frame.denoised.width, h = self.frame.denoised.height;
+  const int w = self.frame.denoised.width(), h = self.frame.denoised.height();
   dn::Image accumulated = dn::temporal::pixelsToImage(result.history, w, h);
   step.filter = secondsSince(start);
   start = std::chrono::steady_clock::now();
   step.accumulatedFrames = result.stats.accumulatedFrames;
   self.frame.history = denoisedHistory(f, std::move(accumulated), step.accumulatedFrames);
-  self.onDevice.history = dn::temporal::pixelsToDevice(self.frame.history, device);
+  self.onDevice.history = dn::temporal::pixelsToDevice(self.frame.history.floats(), device);
   step.history = secondsSince(start);
   start = std::chrono::steady_clock::now();
   const torch::Tensor blended = dn::temporal::blendWithHistory(
@@ -347,8 +347,9 @@ int run(const Args& args) {
       if (timed) times.alone.push_back(secondsSince(start));
       held.frame.denoised = std::move(alone.color);
       held.frame.noisy = held.buffers.get("color");
-      held.frame.guides = {guide(held.buffers, "albedo"), guide(held.buffers, "normal"),
-                           guide(held.buffers, "depth")};
+      held.frame.guides =
+          dn::motion::Guides{guide(held.buffers, "albedo"), guide(held.buffers, "normal"),
+                             guide(held.buffers, "depth")};
       held.frame.motion = motion;
       held.cleanAlbedo = std::move(alone.cleanAlbedo);
       held.cleanNormal = std::move(alone.cleanNormal);

@@ -330,9 +330,9 @@ temporal::WindowFrame stillFrame(const Synthetic& truth, unsigned noiseSeed,
   temporal::WindowFrame f;
   f.noisy = truth.color;
   f.denoised = truth.color;
-  for (std::size_t i = 0; i < f.noisy.pixels.size(); ++i) {
-    f.noisy.pixels[i] += big(noise);
-    f.denoised.pixels[i] += small(leftover);
+  for (std::size_t i = 0; i < f.noisy.floats().pixels.size(); ++i) {
+    f.noisy.floats().pixels[i] += big(noise);
+    f.denoised.floats().pixels[i] += small(leftover);
   }
   f.guides = guides(truth);
   f.motion = constantMotion(truth.color.width, truth.color.height, 0, 0, 0, 0);
@@ -355,8 +355,8 @@ std::vector<temporal::WindowFrame> brighterNeighbours(const Synthetic& truth, un
                                                       unsigned leftoverSeed) {
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, noiseSeed, leftoverSeed);
   for (unsigned t : {0u, 2u}) {
-    for (float& v : frames[t].denoised.pixels) v *= 1.2f;
-    for (float& v : frames[t].noisy.pixels) v *= 1.2f;
+    for (float& v : frames[t].denoised.floats().pixels) v *= 1.2f;
+    for (float& v : frames[t].noisy.floats().pixels) v *= 1.2f;
   }
   return frames;
 }
@@ -426,14 +426,14 @@ TEST_CASE("temporal filter: independent leftovers average down; repeated noise d
   CHECK(r.stats.repeatedNoise == 0);
   CHECK(r.stats.historyShare > 0.6);
   CHECK(meanSquaredError(r.color, truth.color) <
-        0.4 * meanSquaredError(frames[2].denoised, truth.color));
+        0.4 * meanSquaredError(frames[2].denoised.floats(), truth.color));
 
   // A fixed seed on a still camera: every frame the same noise and the same result.
   std::vector<temporal::WindowFrame> repeated(5, stillFrame(truth, 7, 8));
   const temporal::TemporalResult same = temporal::filterFrame(windowOf(repeated), 2);
   CHECK(same.stats.repeatedNoise == 4);
   CHECK(same.stats.historyShare == 0.0);
-  CHECK(same.color.pixels == repeated[2].denoised.pixels);
+  CHECK(same.color.pixels == repeated[2].denoised.floats().pixels);
 
   // One-sided at the end of a shot, and a missing frame ends the chain.
   std::vector<const temporal::WindowFrame*> edge = {&frames[0], &frames[1], nullptr, &frames[3]};
@@ -462,7 +462,7 @@ TEST_CASE("temporal filter: the noisy renders accumulate with its weights, varia
   std::vector<temporal::WindowFrame> repeated(5, stillFrame(truth, 7, 8));
   const temporal::TemporalResult same = temporal::filterFrame(windowOf(repeated), 2);
   CHECK(same.stats.accumulatedFrames == 1.0);
-  CHECK(same.history.pixels == repeated[2].noisy.pixels);
+  CHECK(same.history.pixels == repeated[2].noisy.floats().pixels);
 }
 
 TEST_CASE("temporal filter: the two estimates blend by the accumulated share") {
@@ -481,7 +481,7 @@ TEST_CASE("temporal filter: the past frames' denoised histories average with the
   // Each history: the truth plus a leftover error of its own.
   for (unsigned t = 0; t < frames.size(); ++t)
     frames[t].history = stillFrame(truth, 0, 900 + t).denoised;
-  const Image own = frames[2].history;
+  const Image own = frames[2].history.floats();
 
   // Only the past counts: the future's histories are not there yet in a run.
   std::vector<temporal::WindowFrame> futureOnly = frames;
@@ -508,7 +508,7 @@ TEST_CASE("temporal filter: the past frames' denoised histories average with the
   for (unsigned t : {0u, 1u})
     for (int y = 0; y < 24; ++y)
       for (int x = 0; x < 12; ++x)
-        for (int c = 0; c < 3; ++c) relit[t].history.at(x, y, c) += 0.6f;
+        for (int c = 0; c < 3; ++c) relit[t].history.floats().at(x, y, c) += 0.6f;
   const Image kept = temporal::historyMean(own, temporal::filterFrame(windowOf(relit), 2));
   double brighter = 0.0;
   for (int y = 0; y < 24; ++y)
@@ -540,8 +540,8 @@ TEST_CASE("temporal filter: a visible sun does not hide the rest of the frame") 
     for (int y = 10; y < 14; ++y)
       for (int x = 100; x < 104; ++x)
         for (int c = 0; c < 3; ++c) {
-          f.noisy.at(x, y, c) = 1e6f;
-          f.denoised.at(x, y, c) = 1e5f;
+          f.noisy.floats().at(x, y, c) = 1e6f;
+          f.denoised.floats().at(x, y, c) = 1e5f;
         }
   const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 2);
   CHECK(r.stats.repeatedNoise == 0);
@@ -555,8 +555,8 @@ TEST_CASE("temporal filter: a moving shadow in a neighbour is not averaged in") 
   for (int y = 0; y < 24; ++y)
     for (int x = 0; x < 12; ++x)
       for (int c = 0; c < 3; ++c) {
-        frames[2].denoised.at(x, y, c) *= 0.25f;
-        frames[2].noisy.at(x, y, c) *= 0.25f;
+        frames[2].denoised.floats().at(x, y, c) *= 0.25f;
+        frames[2].noisy.floats().at(x, y, c) *= 0.25f;
       }
   const std::vector<const temporal::WindowFrame*> window = windowOf(frames);
   const temporal::TemporalResult r = temporal::filterFrame(window, 1);
@@ -580,7 +580,7 @@ TEST_CASE("temporal filter: a blotch in the frame's own result is averaged out, 
   // its neighbours do not share.
   for (int y = 8; y < 14; ++y)
     for (int x = 8; x < 14; ++x)
-      for (int c = 0; c < 3; ++c) frames[4].denoised.at(x, y, c) += 0.5f;
+      for (int c = 0; c < 3; ++c) frames[4].denoised.floats().at(x, y, c) += 0.5f;
   auto blotchError = [&](double reference) {
     temporal::TemporalOptions options;
     options.colourReference = reference;
@@ -609,7 +609,7 @@ TEST_CASE("temporal filter: a neighbour whose light changed over the frame is re
   // Brought to the frame's light, they lower its leftover error, and do not
   // brighten it.
   CHECK(meanSquaredError(r.color, truth.color) <
-        0.9 * meanSquaredError(frames[1].denoised, truth.color));
+        0.9 * meanSquaredError(frames[1].denoised.floats(), truth.color));
   double result = 0.0, light = 0.0;
   for (std::size_t i = 1; i < r.color.pixels.size(); i += 3)
     result += r.color.pixels[i], light += truth.color.pixels[i];
@@ -659,9 +659,10 @@ std::vector<temporal::WindowFrame> driftingShot(const Synthetic& truth, float st
   for (int t = 0; t < 5; ++t) {
     const float light = 1.0f + step * static_cast<float>(t - 4);
     temporal::WindowFrame& f = frames[static_cast<std::size_t>(t)];
-    for (int y = 0; y < f.denoised.height / 2; ++y)
-      for (int x = 0; x < f.denoised.width; ++x)
-        for (int c = 0; c < 3; ++c) f.denoised.at(x, y, c) *= light, f.noisy.at(x, y, c) *= light;
+    for (int y = 0; y < f.denoised.height() / 2; ++y)
+      for (int x = 0; x < f.denoised.width(); ++x)
+        for (int c = 0; c < 3; ++c)
+          f.denoised.floats().at(x, y, c) *= light, f.noisy.floats().at(x, y, c) *= light;
   }
   return frames;
 }
@@ -702,7 +703,7 @@ TEST_CASE("temporal filter: a light drifting over part of the frame is brought t
   // Another image of the frames (a light pass) is brought to it alike, by its
   // own ratio; the results themselves give the colour bit for bit.
   std::vector<const Image*> results;
-  for (const auto& f : frames) results.push_back(&f.denoised);
+  for (const auto& f : frames) results.push_back(&f.denoised.floats());
   CHECK(temporal::filterWith(r.weights, results).pixels == r.color.pixels);
   int drifted = 0;
   for (const temporal::NeighbourWeights& n : r.weights.neighbours)
@@ -711,7 +712,7 @@ TEST_CASE("temporal filter: a light drifting over part of the frame is brought t
   // A pass whose own light differs where the colour's did not drift (its
   // leftover error, another light's share) is brought nowhere there.
   std::vector<Image> pass;
-  for (const auto& f : frames) pass.push_back(f.denoised);
+  for (const auto& f : frames) pass.push_back(f.denoised.floats());
   for (int y = 32; y < 64; ++y)
     for (int x = 0; x < 96; ++x)
       for (int c = 0; c < 3; ++c) pass[2].at(x, y, c) *= 0.9f;
@@ -733,14 +734,14 @@ TEST_CASE("temporal filter: a change of light relighting cannot undo leaves the 
     for (std::size_t i = 0; i < frames[t].denoised.pixelCount(); ++i) {
       const float f = factor(random);
       for (int c = 0; c < 3; ++c) {
-        frames[t].denoised.pixels[3 * i + c] *= f;
-        frames[t].noisy.pixels[3 * i + c] *= f;
+        frames[t].denoised.floats().pixels[3 * i + c] *= f;
+        frames[t].noisy.floats().pixels[3 * i + c] *= f;
       }
     }
   const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 1);
   CHECK(r.stats.changedLight == 2);
   CHECK(r.stats.historyShare == 0.0);
-  CHECK(r.color.pixels == frames[1].denoised.pixels);
+  CHECK(r.color.pixels == frames[1].denoised.floats().pixels);
 }
 
 TEST_CASE("the environment is told by its depth (0, or beyond 1e9) and never reprojected") {
@@ -784,10 +785,10 @@ TEST_CASE("temporal filter: a pan's sky, its vectors zero, does not cost the gro
     temporal::WindowFrame f = stillFrame(still, 700 + t, 800 + t);
     for (int y = 0; y < sky; ++y)
       for (int x = 0; x < w; ++x) {
-        f.guides.depth.at(x, y, 0) = 0.0f;
+        f.guides.depth.floats().at(x, y, 0) = 0.0f;
         for (int c = 0; c < 3; ++c) {
-          f.denoised.at(x, y, c) = slid.color.at(x, y, c);
-          f.noisy.at(x, y, c) = slid.color.at(x, y, c) + aa(jitter);
+          f.denoised.floats().at(x, y, c) = slid.color.at(x, y, c);
+          f.noisy.floats().at(x, y, c) = slid.color.at(x, y, c) + aa(jitter);
         }
       }
     frames.push_back(std::move(f));
@@ -806,8 +807,8 @@ TEST_CASE("temporal filter: a pan's sky, its vectors zero, does not cost the gro
           e += std::pow(image.at(x, y, c) - (y < sky ? sliding : ground).color.at(x, y, c), 2);
     return e;
   };
-  CHECK(rowsError(r.color, sky, h) < 0.7 * rowsError(frames[1].denoised, sky, h));
-  CHECK(rowsError(r.color, 0, sky) == rowsError(frames[1].denoised, 0, sky));
+  CHECK(rowsError(r.color, sky, h) < 0.7 * rowsError(frames[1].denoised.floats(), sky, h));
+  CHECK(rowsError(r.color, 0, sky) == rowsError(frames[1].denoised.floats(), 0, sky));
 }
 
 TEST_CASE("temporal filter: the result does not depend on the number of threads") {
@@ -839,9 +840,9 @@ namespace {
 
 // Per frame, `image` of it, for filterWith.
 std::vector<const Image*> imagesOf(const std::vector<temporal::WindowFrame>& frames,
-                                   Image temporal::WindowFrame::*image) {
+                                   temporal::WindowImage temporal::WindowFrame::*image) {
   std::vector<const Image*> images;
-  for (const auto& f : frames) images.push_back(&(f.*image));
+  for (const auto& f : frames) images.push_back(&(f.*image).floats());
   return images;
 }
 
@@ -890,7 +891,7 @@ TEST_CASE("temporal filter: a light pass filtered with the results' weights flic
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 9, 300, 400);
   std::vector<Image> passes;
   for (unsigned t = 0; t < frames.size(); ++t) {
-    Image pass = stillFrame(truth, 0, 450 + t).denoised;
+    Image pass = stillFrame(truth, 0, 450 + t).denoised.floats();
     for (float& v : pass.pixels) v *= 0.5f;
     passes.push_back(std::move(pass));
   }
@@ -910,7 +911,7 @@ namespace {
 std::vector<Image> stillPass(const Synthetic& truth, unsigned count, float share, unsigned seed) {
   std::vector<Image> out;
   for (unsigned t = 0; t < count; ++t) {
-    out.push_back(stillFrame(truth, seed + t, seed + 100 + t).denoised);
+    out.push_back(stillFrame(truth, seed + t, seed + 100 + t).denoised.floats());
     for (float& v : out.back().pixels) v *= share;
   }
   return out;
@@ -995,8 +996,8 @@ TEST_CASE(
       CHECK(mirror.color.pixels == unknown.color.pixels);
     } else {
       // A pixel a frame: an all-mirror frame is its own result alone.
-      CHECK(mirror.color.pixels == (*frames)[1].denoised.pixels);
-      CHECK(unknown.color.pixels != (*frames)[1].denoised.pixels);
+      CHECK(mirror.color.pixels == (*frames)[1].denoised.floats().pixels);
+      CHECK(unknown.color.pixels != (*frames)[1].denoised.floats().pixels);
     }
   }
 }
@@ -1041,7 +1042,7 @@ TEST_CASE("learned trust: trusting nothing gives the frame alone; its view is wh
   temporal::TemporalOptions options;
   options.learnedTrust = std::make_shared<temporal::LearnedTrust>(constantTrust(-100.0f));
   const temporal::TemporalResult none = temporal::filterFrame(windowOf(frames), 2, options);
-  CHECK(none.color.pixels == frames[2].denoised.pixels);
+  CHECK(none.color.pixels == frames[2].denoised.floats().pixels);
 
   // Trusting fully: each neighbour weighs what the rules gave it, and the
   // observer sees every kept neighbour's features and those weights.

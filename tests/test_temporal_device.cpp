@@ -53,8 +53,8 @@ struct Scene {
 WindowFrame frameOf(const Scene& s, unsigned noiseSeed, unsigned leftoverSeed) {
   WindowFrame f;
   f.noisy = f.denoised = Image(s.width, s.height, 3);
-  f.guides = {Image(s.width, s.height, 3), Image(s.width, s.height, 3),
-              Image(s.width, s.height, 1)};
+  f.guides = motion::Guides{Image(s.width, s.height, 3), Image(s.width, s.height, 3),
+                            Image(s.width, s.height, 1)};
   std::mt19937 noise(noiseSeed), leftover(leftoverSeed);
   std::normal_distribution<float> big(0.0f, 0.1f), small(0.0f, 0.015f);
   for (int y = 0; y < s.height; ++y)
@@ -62,12 +62,12 @@ WindowFrame frameOf(const Scene& s, unsigned noiseSeed, unsigned leftoverSeed) {
       const bool box = s.inBox(x, y);
       const float t = box ? 0.9f : texture(x + s.shift, y);
       for (int c = 0; c < 3; ++c) {
-        f.noisy.at(x, y, c) = t * (1.0f + 0.1f * c) + big(noise);
-        f.denoised.at(x, y, c) = t * (1.0f + 0.1f * c) + small(leftover);
-        f.guides.albedo.at(x, y, c) = box ? 0.9f : 0.5f;
+        f.noisy.floats().at(x, y, c) = t * (1.0f + 0.1f * c) + big(noise);
+        f.denoised.floats().at(x, y, c) = t * (1.0f + 0.1f * c) + small(leftover);
+        f.guides.albedo.floats().at(x, y, c) = box ? 0.9f : 0.5f;
       }
-      f.guides.normal.at(x, y, box ? 2 : 1) = 1.0f;
-      f.guides.depth.at(x, y, 0) = box ? 2.0f : 10.0f;
+      f.guides.normal.floats().at(x, y, box ? 2 : 1) = 1.0f;
+      f.guides.depth.floats().at(x, y, 0) = box ? 2.0f : 10.0f;
     }
   return f;
 }
@@ -246,8 +246,8 @@ TEST_CASE("device filter: a pan with a moving occluder agrees, disocclusions lef
 TEST_CASE("device filter: relit neighbours and a change of light agree") {
   std::vector<WindowFrame> frames = shot(3, 0.0f, 0, 0, 500);
   for (unsigned t : {0u, 2u}) {
-    for (float& v : frames[t].denoised.pixels) v *= 1.2f;
-    for (float& v : frames[t].noisy.pixels) v *= 1.2f;
+    for (float& v : frames[t].denoised.floats().pixels) v *= 1.2f;
+    for (float& v : frames[t].noisy.floats().pixels) v *= 1.2f;
   }
   const Both relit = filterBoth(windowOf(frames), 1);
   CHECK(relit.cpu.stats.relit == 2);
@@ -263,7 +263,7 @@ TEST_CASE("device filter: relit neighbours and a change of light agree") {
   std::vector<Image> pool;
   std::vector<torch::Tensor> poolOnDevice;
   for (unsigned t = 0; t < frames.size(); ++t) {
-    pool.push_back(frames[t].denoised);
+    pool.push_back(frames[t].denoised.floats());
     const int from = t == 1 ? 0 : 4, to = t == 1 ? 8 : pool[t].width;  // where it is lit
     for (int y = 0; y < pool[t].height; ++y)
       for (int x = 0; x < pool[t].width; ++x)
@@ -287,21 +287,21 @@ TEST_CASE("device filter: relit neighbours and a change of light agree") {
     for (std::size_t i = 0; i < frames[t].denoised.pixelCount(); ++i) {
       const float f = factor(random);
       for (int c = 0; c < 3; ++c) {
-        frames[t].denoised.pixels[3 * i + c] *= f;
-        frames[t].noisy.pixels[3 * i + c] *= f;
+        frames[t].denoised.floats().pixels[3 * i + c] *= f;
+        frames[t].noisy.floats().pixels[3 * i + c] *= f;
       }
     }
   const Both changed = filterBoth(windowOf(frames), 1);
   CHECK(changed.onHost.stats.changedLight == 2);
-  CHECK(changed.onHost.color.pixels == frames[1].denoised.pixels);
-  CHECK(changed.onHost.history.pixels == frames[1].noisy.pixels);
+  CHECK(changed.onHost.color.pixels == frames[1].denoised.floats().pixels);
+  CHECK(changed.onHost.history.pixels == frames[1].noisy.floats().pixels);
 }
 
 TEST_CASE("device filter: a light drifting over part of the frame is brought in alike") {
   std::vector<WindowFrame> frames = shot(5, 0.0f, 0, 0, 2000);
   for (int t = 0; t < 5; ++t) {  // the top half 4 % dimmer a frame before the last
     WindowFrame& f = frames[std::size_t(t)];
-    for (Image* image : {&f.denoised, &f.noisy})
+    for (Image* image : {&f.denoised.floats(), &f.noisy.floats()})
       for (int y = 0; y < image->height / 2; ++y)
         for (int x = 0; x < image->width; ++x)
           for (int c = 0; c < 3; ++c) image->at(x, y, c) *= 1.0f + 0.04f * float(t - 4);
@@ -314,14 +314,14 @@ TEST_CASE("device filter: a light drifting over part of the frame is brought in 
   std::vector<torch::Tensor> onDevice;
   std::vector<const Image*> results;
   for (const WindowFrame& f : frames) {
-    onDevice.push_back(pixelsToDevice(f.denoised, kCpu));
-    results.push_back(&f.denoised);
+    onDevice.push_back(pixelsToDevice(f.denoised.floats(), kCpu));
+    results.push_back(&f.denoised.floats());
   }
   std::vector<const torch::Tensor*> onDeviceOf;
   for (const torch::Tensor& t : onDevice) onDeviceOf.push_back(&t);
   checkAgrees("drifted, filterWith",
               pixelsToImage(filterWith(drifted.device.weights, onDeviceOf),
-                            frames[4].denoised.width, frames[4].denoised.height),
+                            frames[4].denoised.width(), frames[4].denoised.height()),
               filterWith(drifted.cpu.weights, results));
 }
 
@@ -331,7 +331,7 @@ TEST_CASE("device filter: a neighbour repeating the frame's noise is left out, a
   const Both b = filterBoth(windowOf(repeated), 2);
   CHECK(b.onHost.stats.repeatedNoise == 4);
   CHECK(b.cpu.stats.repeatedNoise == 4);
-  CHECK(b.onHost.color.pixels == repeated[2].denoised.pixels);
+  CHECK(b.onHost.color.pixels == repeated[2].denoised.floats().pixels);
   CHECK(b.onHost.stats.accumulatedFrames == 1.0);
 }
 
@@ -359,8 +359,8 @@ TEST_CASE(
   options.observeTrust = nullptr;
   options.learnedTrust = std::make_shared<LearnedTrust>(constantTrust(-100.0f));
   const Both none = filterBoth(windowOf(frames), 2, options);
-  CHECK(none.onHost.color.pixels == frames[2].denoised.pixels);
-  CHECK(none.cpu.color.pixels == frames[2].denoised.pixels);
+  CHECK(none.onHost.color.pixels == frames[2].denoised.floats().pixels);
+  CHECK(none.cpu.color.pixels == frames[2].denoised.floats().pixels);
 }
 
 TEST_CASE("device filter: past histories, their mean and the blend agree") {
@@ -369,13 +369,13 @@ TEST_CASE("device filter: past histories, their mean and the blend agree") {
     frames[t].history = shot(1, 0.0f, 0, 0, 1200 + t)[0].denoised;
   // A light that moved since over the left half of the past histories.
   for (unsigned t : {0u, 1u})
-    for (int y = 0; y < frames[t].history.height; ++y)
+    for (int y = 0; y < frames[t].history.height(); ++y)
       for (int x = 0; x < 12; ++x)
-        for (int c = 0; c < 3; ++c) frames[t].history.at(x, y, c) += 0.6f;
+        for (int c = 0; c < 3; ++c) frames[t].history.floats().at(x, y, c) += 0.6f;
   const Both b = filterBoth(windowOf(frames), 2);
   REQUIRE(b.cpu.pastHistories.images.size() == 2);
   checkSameFilter("with histories", b);
-  const Image& own = frames[2].history;
+  const Image& own = frames[2].history.floats();
   const torch::Tensor ownOnDevice = pixelsToDevice(own, kCpu);
   const torch::Tensor mean = historyMean(ownOnDevice, b.device);
   const Image cpuMean = historyMean(own, b.cpu);
@@ -401,7 +401,7 @@ TEST_CASE("device filter: its weights filter another image as on the CPU") {
   std::vector<Image> hostPasses;
   for (std::size_t t = 0; t < frames.size(); ++t) {
     results.push_back(b.frames[t].denoised);
-    Image pass = shot(1, 0.5f * t, 0, 0, 1600 + t)[0].denoised;  // a light pass of its own
+    Image pass = shot(1, 0.5f * t, 0, 0, 1600 + t)[0].denoised.floats();  // a light pass of its own
     for (float& v : pass.pixels) v *= 0.5f;
     passes.push_back(pixelsToDevice(pass, kCpu));
     hostPasses.push_back(std::move(pass));
@@ -432,10 +432,10 @@ TEST_CASE("device filter: light that moves with the view counts where the surfac
   // A pan with an occluder, its view-dependent share rising across the frame.
   std::vector<WindowFrame> frames = shot(5, 0.5f, 3, 8, 1800);
   for (WindowFrame& f : frames) {
-    f.viewDependent = Image(f.denoised.width, f.denoised.height, 1);
-    for (int y = 0; y < f.viewDependent.height; ++y)
-      for (int x = 0; x < f.viewDependent.width; ++x)
-        f.viewDependent.at(x, y, 0) = float(x) / f.viewDependent.width;
+    f.viewDependent = Image(f.denoised.width(), f.denoised.height(), 1);
+    for (int y = 0; y < f.viewDependent.height(); ++y)
+      for (int x = 0; x < f.viewDependent.width(); ++x)
+        f.viewDependent.floats().at(x, y, 0) = float(x) / f.viewDependent.width();
   }
   // Partly still: the pan moves 0.5 px a frame, the share falls to nothing at 2.
   TemporalOptions options;
@@ -449,11 +449,11 @@ TEST_CASE("device filter: light that moves with the view counts where the surfac
   std::vector<const Image*> hostResults;
   for (std::size_t t = 0; t < frames.size(); ++t) {
     results.push_back(b.frames[t].denoised);
-    hostResults.push_back(&frames[t].denoised);
+    hostResults.push_back(&frames[t].denoised.floats());
   }
   std::vector<const torch::Tensor*> pointers;
   for (const torch::Tensor& r : results) pointers.push_back(&r);
-  const Image& own = frames[2].denoised;
+  const Image& own = frames[2].denoised.floats();
   const Image pass = filterWith(b.cpu.weights, hostResults, 2.0);
   CHECK(pass.pixels != own.pixels);
   checkAgrees("a view-dependent pass by the weights",
@@ -485,8 +485,8 @@ TEST_CASE("device filter: on CUDA as on the CPU" * doctest::skip(!torch::cuda::i
   checkSameFilter("learned trust, CUDA", filterBoth(windowOf(pan), 2, learned, cuda));
   std::vector<WindowFrame> relit = shot(3, 0.0f, 0, 0, 500);
   for (unsigned t : {0u, 2u}) {
-    for (float& v : relit[t].denoised.pixels) v *= 1.2f;
-    for (float& v : relit[t].noisy.pixels) v *= 1.2f;
+    for (float& v : relit[t].denoised.floats().pixels) v *= 1.2f;
+    for (float& v : relit[t].noisy.floats().pixels) v *= 1.2f;
   }
   checkSameFilter("relit, CUDA", filterBoth(windowOf(relit), 1, {}, cuda));
 }
@@ -503,7 +503,7 @@ TEST_CASE("device filter: the Cycles renders of testdata/sequence agree with fil
     WindowFrame f;
     f.noisy = buffers.get("color");
     f.denoised = f.noisy;
-    const int w = f.noisy.width, h = f.noisy.height;
+    const int w = f.noisy.width(), h = f.noisy.height();
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x)
         for (int c = 0; c < 3; ++c) {
@@ -511,11 +511,11 @@ TEST_CASE("device filter: the Cycles renders of testdata/sequence agree with fil
           int count = 0;
           for (int v = std::max(0, y - 1); v <= std::min(h - 1, y + 1); ++v)
             for (int u = std::max(0, x - 1); u <= std::min(w - 1, x + 1); ++u, ++count)
-              sum += f.noisy.at(u, v, c);
-          f.denoised.at(x, y, c) = sum / count;
+              sum += f.noisy.floats().at(u, v, c);
+          f.denoised.floats().at(x, y, c) = sum / count;
         }
     auto guide = [&](const char* name) { return buffers.has(name) ? buffers.get(name) : Image(); };
-    f.guides = {guide("albedo"), guide("normal"), guide("depth")};
+    f.guides = motion::Guides{guide("albedo"), guide("normal"), guide("depth")};
     auto field = motion::readMotion(path, w, h);
     REQUIRE(field);
     f.motion = std::move(*field);

@@ -859,17 +859,21 @@ Image pixelsToImage(const torch::Tensor& pixels, int width, int height) {
 
 DeviceFrame toDevice(const WindowFrame& frame, const torch::Device& device) {
   DeviceFrame out;
-  out.width = frame.denoised.width, out.height = frame.denoised.height;
-  out.denoised = pixelsToDevice(frame.denoised, device);
-  out.noisy = pixelsToDevice(frame.noisy, device);
-  out.history = pixelsToDevice(frame.history, device);
-  out.albedo = pixelsToDevice(frame.guides.albedo, device);
-  out.normal = pixelsToDevice(frame.guides.normal, device);
-  out.depth = pixelsToDevice(frame.guides.depth, device);
-  out.viewDependent = pixelsToDevice(frame.viewDependent, device);
+  out.width = frame.denoised.width(), out.height = frame.denoised.height();
+  Image scratch;
+  auto upload = [&](const WindowImage& image) {
+    return pixelsToDevice(image.floats(scratch), device);
+  };
+  out.denoised = upload(frame.denoised);
+  out.noisy = upload(frame.noisy);
+  out.history = upload(frame.history);
+  out.albedo = upload(frame.guides.albedo);
+  out.normal = upload(frame.guides.normal);
+  out.depth = upload(frame.guides.depth);
+  out.viewDependent = upload(frame.viewDependent);
   if (!frame.motion.empty()) {
-    out.toPrevious = pixelsToDevice(frame.motion.toPrevious, device);
-    out.toNext = pixelsToDevice(frame.motion.toNext, device);
+    out.toPrevious = upload(frame.motion.toPrevious);
+    out.toNext = upload(frame.motion.toNext);
   }
   return out;
 }

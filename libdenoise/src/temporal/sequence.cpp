@@ -7,6 +7,7 @@
 #include <optional>
 #include <set>
 #include <stdexcept>
+#include <utility>
 
 #include "dn/io/frame_pattern.h"
 #include "dn/motion/motion.h"
@@ -19,26 +20,46 @@ namespace dn::temporal {
 const char* const kHeldInWindow[] = {"color", "albedo", "normal", "depth"};
 
 // A frame as read: its guides and motion, its noisy colour and, once denoised
-// alone, its result. The buffers the model reads are dropped once denoised, so
-// a window of 1080p frames holds about 0.13 GB a frame, not the whole file.
+// alone, its result. The buffers the model reads are dropped once denoised,
+// and the window holds its images in half floats where that loses nothing
+// (WindowFrame), so a window of 1080p frames holds about 0.12 GB a frame.
 struct Sequence::Input {
   // What the model reads; once denoised, all but the colour, albedo, normal
   // and depth, which `frame` holds (Sequence::frame puts them back).
   FrameBuffers buffers;
   std::set<std::string> heldInWindow;  // those of kHeldInWindow `frame` holds as read
   WindowFrame frame;                   // noisy, guides, motion; denoised
-  Image cleanAlbedo;                   // the prefilter's, for denoising the frame's history
-  Image cleanNormal;
-  std::optional<Companions> companions;  // once made
-  std::optional<DeviceFrame> onDevice;   // SequenceSettings::filterDevice: the frame there
+  // The prefilter's, for denoising the frame's history (rounded to half floats).
+  WindowImage cleanAlbedo, cleanNormal;
+  std::optional<HeldCompanions> companions;  // once made
+  std::optional<DeviceFrame> onDevice;       // SequenceSettings::filterDevice: the frame there
+  bool inPast = false;                       // enterPast() done
 
   // Once the frame is in the past its own denoisings are done (a frame denoised
   // again with -n keeps them), and only a frame's own view-dependent share is
-  // used: 62 MB less a 1080p frame.
-  void dropOwnUse() { cleanAlbedo = cleanNormal = frame.viewDependent = Image(); }
+  // used: about 30 MB less a 1080p frame.
+  void dropOwnUse() {
+    cleanAlbedo = cleanNormal = WindowImage();
+    frame.viewDependent = WindowImage();
+  }
+
+  // Once the frame is before the one filtered, its result and history are
+  // held in half floats, and its copy on the device holds the same values.
+  void enterPast(const std::optional<torch::Device>& device) {
+    if (std::exchange(inPast, true)) return;
+    frame.denoised.pack();
+    if (companions)
+      for (auto& [name, companion] : *companions) companion.image.pack();
+    if (!onDevice) return;
+    onDevice->denoised = pixelsToDevice(frame.denoised.toImage(), *device);
+    onDevice->history = pixelsToDevice(frame.history.toImage(), *device);
+  }
 
   // The window's copies of the buffers of kHeldInWindow, in its order.
-  std::array<const Image*, std::size(kHeldInWindow)> windowCopies() const {
+  std::array<WindowImage*, std::size(kHeldInWindow)> windowCopies() {
+    return {&frame.noisy, &frame.guides.albedo, &frame.guides.normal, &frame.guides.depth};
+  }
+  std::array<const WindowImage*, std::size(kHeldInWindow)> windowCopies() const {
     return {&frame.noisy, &frame.guides.albedo, &frame.guides.normal, &frame.guides.depth};
   }
   // The frame's buffers as read, put back together without decoding the file again.
@@ -75,13 +96,13 @@ motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
 
 // The frame with its colour replaced by the accumulated render, and its
 // albedo and normal by the prefilter's where its first denoising cleaned them.
-FrameBuffers withHistory(const FrameBuffers& frame, Image history, const Image& cleanAlbedo,
-                         const Image& cleanNormal) {
+FrameBuffers withHistory(const FrameBuffers& frame, Image history, const WindowImage& cleanAlbedo,
+                         const WindowImage& cleanNormal) {
   FrameBuffers out = frame;
   out.buffers["color"] = std::move(history);
   if (!cleanAlbedo.empty() && !cleanNormal.empty()) {
-    out.buffers["albedo"] = cleanAlbedo;
-    out.buffers["normal"] = cleanNormal;
+    out.buffers["albedo"] = cleanAlbedo.toImage();
+    out.buffers["normal"] = cleanNormal.toImage();
     out.auxPrefiltered = true;
   }
   return out;
@@ -169,7 +190,8 @@ FrameBuffers Sequence::Input::readAgain() const {
   FrameBuffers out = buffers;
   const auto copies = windowCopies();
   for (std::size_t k = 0; k < copies.size(); ++k)
-    if (heldInWindow.count(kHeldInWindow[k])) out.buffers.emplace(kHeldInWindow[k], *copies[k]);
+    if (heldInWindow.count(kHeldInWindow[k]))
+      out.buffers.emplace(kHeldInWindow[k], copies[k]->toImage());
   return out;
 }
 
@@ -186,11 +208,20 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   entry->frame.guides = guidesOf(frame, path, settings_.read);
   if (settings_.viewDependentShare)
     entry->frame.viewDependent = settings_.viewDependentShare(path, frame);
-  if (auto field = motionOf(number, path, frame)) entry->frame.motion = std::move(*field);
+  if (auto field = motionOf(number, path, frame)) {
+    entry->frame.motion = std::move(*field);
+    entry->frame.motion.toPrevious.pack();
+    entry->frame.motion.toNext.pack();
+  }
+  // Packed only where no bit changes: Sequence::frame gives them back.
   const auto copies = entry->windowCopies();
-  for (std::size_t k = 0; k < copies.size(); ++k)
-    if (frame.has(kHeldInWindow[k]) && frame.get(kHeldInWindow[k]).pixels == copies[k]->pixels)
-      entry->heldInWindow.insert(kHeldInWindow[k]);
+  for (std::size_t k = 0; k < copies.size(); ++k) {
+    const char* name = kHeldInWindow[k];
+    if (frame.has(name) && frame.get(name).pixels == copies[k]->floats().pixels)
+      entry->heldInWindow.insert(name);
+    copies[k]->packIfExact();
+  }
+  entry->frame.viewDependent.pack();
   if (given) {  // kept for Sequence::frame, but for what the window holds
     entry->buffers = *given;
     entry->dropHeld();
@@ -220,6 +251,8 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   self->frame.denoised = std::move(result->color);  // the filter's input, held once
   self->cleanAlbedo = std::move(result->cleanAlbedo);
   self->cleanNormal = std::move(result->cleanNormal);
+  self->cleanAlbedo.pack();
+  self->cleanNormal.pack();
   return estimates_[number] = result;
 }
 
@@ -235,7 +268,7 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
   Filtered out;
   out.alone = estimate(number, given, read, denoise);
   if (!out.alone) return out;
-  const Image& own = input(number, nullptr, read)->frame.denoised;
+  const WindowImage& own = input(number, nullptr, read)->frame.denoised;
   std::vector<const WindowFrame*> window;
   std::vector<const DeviceFrame*> deviceWindow;
   for (int m = number - radius; m <= number + radius; ++m) {
@@ -244,6 +277,11 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
     window.push_back(usable ? &source->frame : nullptr);
     if (settings_.filterDevice) deviceWindow.push_back(usable ? &onDevice(*source) : nullptr);
   }
+  // Whichever call made them, the filter sees the past frames so (a shot
+  // split into runs gives the same bits).
+  for (int m = number - radius; m < number; ++m)
+    if (auto past = inputs_.find(m); past != inputs_.end())
+      past->second->enterPast(settings_.filterDevice);
   TemporalOptions options = settings_.filter;
   options.radius = radius;
   if (!settings_.filterDevice) {
@@ -253,7 +291,7 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
   out.device = filterFrame(deviceWindow, radius, options);
   out.result.stats = out.device->stats;
   if (out.device->history.defined())  // the network's input
-    out.result.history = pixelsToImage(out.device->history, own.width, own.height);
+    out.result.history = pixelsToImage(out.device->history, own.width(), own.height());
   return out;
 }
 
@@ -275,17 +313,18 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalR
                                 const Denoise& denoise) {
   Input& self = *inputs_.at(number);
   // Where no neighbour was trusted the history is the frame's own render.
-  self.frame.history =
-      filtered.stats.accumulatedFrames > 1.0
-          ? denoise(fileOf(number), withHistory(frame, std::move(filtered.history),
-                                                self.cleanAlbedo, self.cleanNormal))
-                .color
-          : self.frame.denoised;
+  Image history = filtered.stats.accumulatedFrames > 1.0
+                      ? denoise(fileOf(number), withHistory(frame, std::move(filtered.history),
+                                                            self.cleanAlbedo, self.cleanNormal))
+                            .color
+                      : self.frame.denoised.toImage();
   if (self.onDevice)
     self.onDevice->history = filtered.stats.accumulatedFrames > 1.0
-                                 ? pixelsToDevice(self.frame.history, *settings_.filterDevice)
+                                 ? pixelsToDevice(history, *settings_.filterDevice)
                                  : self.onDevice->denoised;
-  return self.frame.history;
+  self.frame.history = history;  // the later frames' past history, in half floats
+  self.frame.history.pack();
+  return history;
 }
 
 void Sequence::makePastHistories(int number, const Read& read, const Denoise& denoise) {
@@ -300,12 +339,19 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
   }
 }
 
-const Companions& Sequence::companionsOf(int number, const FrameBuffers* given,
-                                         const CompanionMaker& make) {
+const Sequence::HeldCompanions& Sequence::companionsOf(int number, const FrameBuffers* given,
+                                                       const CompanionMaker& make) {
   Input& entry = *inputs_.at(number);
   if (!entry.companions) {
-    const std::string path = fileOf(number);
-    entry.companions = make.make(path, given ? *given : entry.readAgain());
+    entry.companions.emplace();
+    for (auto& [name, made] : make.make(fileOf(number), given ? *given : entry.readAgain())) {
+      HeldCompanion& held = (*entry.companions)[name];
+      held.image = std::move(made.image);
+      held.render = std::move(made.render);
+      held.overTime = made.overTime, held.viewDependent = made.viewDependent;
+      held.render.packIfExact();
+      if (entry.inPast) held.image.pack();
+    }
   }
   return *entry.companions;
 }
@@ -317,7 +363,7 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Fram
   // Window index k is frame number - radius + k; only the frames the colour
   // took something from are needed.
   const int first = number - static_cast<int>(weights.centre);
-  std::map<std::size_t, const Companions*> made;
+  std::map<std::size_t, const HeldCompanions*> made;
   made[weights.centre] = &companionsOf(number, &frame, make);
   for (const NeighbourWeights& nb : weights.neighbours)
     made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), nullptr, make);
@@ -325,21 +371,24 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Fram
   FilteredCompanions out;
   for (const auto& [name, own] : *made.at(weights.centre)) {
     if (!own.overTime) {
-      out.filtered[name] = own.image;
+      out.filtered[name] = own.image.toImage();
       continue;
     }
+    // In floats while this companion is filtered.
+    std::vector<Image> unpacked(2 * size);
     std::vector<const Image*> images(size, nullptr), renders(size, nullptr);
     for (const auto& [index, companions] : made) {
       auto it = companions->find(name);
       if (it == companions->end()) continue;
-      images[index] = &it->second.image;
-      if (!it->second.render.empty()) renders[index] = &it->second.render;
+      images[index] = &it->second.image.floats(unpacked[index]);
+      if (!it->second.render.empty())
+        renders[index] = &it->second.render.floats(unpacked[size + index]);
     }
     // A pass no frame of the window has (Cycles writes transmission black
     // where nothing transmits) stays black, without resampling.
     if (std::all_of(images.begin(), images.end(), [](const Image* i) { return allZero(i); }) &&
         std::all_of(renders.begin(), renders.end(), [](const Image* i) { return allZero(i); })) {
-      out.filtered[name] = own.image;
+      out.filtered[name] = *images[weights.centre];
       continue;
     }
     const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;

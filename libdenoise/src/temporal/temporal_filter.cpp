@@ -369,13 +369,10 @@ Image scaled(Image image, const Image& factor) {
   return image;
 }
 
-motion::FrameGeometry geometryOf(const WindowFrame& frame) {
-  return {&frame.guides, &frame.motion};
-}
-
 // What the centre frame holds for the tests, computed once per frame.
 struct Centre {
-  const WindowFrame* frame;
+  Image denoised;            // its result
+  motion::Guides guides;     // its albedo, normal and depth
   double scale;              // its autoexposure
   Image mapped;              // its result, tonemapped
   Image noisyMapped;         // its render, tonemapped
@@ -384,9 +381,11 @@ struct Centre {
 };
 
 Centre centreOf(const WindowFrame& frame) {
-  Centre c{&frame, tonemap::oidnExposure(frame.denoised), {}, {}, {}, {}};
-  c.mapped = tonemapped(frame.denoised, c.scale);
-  c.noisyMapped = tonemapped(frame.noisy, c.scale);
+  Centre c{frame.denoised.toImage(), frame.guides.toGuides(), 1.0, {}, {}, {}, {}};
+  c.scale = tonemap::oidnExposure(c.denoised);
+  c.mapped = tonemapped(c.denoised, c.scale);
+  Image scratch;
+  c.noisyMapped = tonemapped(frame.noisy.floats(scratch), c.scale);
   c.residual = difference(c.noisyMapped, c.mapped);
   c.noise = localNoise(c.residual, 3);
   // A floor: flat, noise-free regions (a clear sky) must not divide by zero.
@@ -428,7 +427,6 @@ std::vector<float> normalisedDifference(const Centre& centre, const Image& image
 // `positions`: where each pixel of the centre is in the neighbour (motion::chainPositions).
 Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, Image positions,
                             bool forward, const TemporalOptions& options) {
-  const WindowFrame& current = *centre.frame;
   Contribution out;
   // Only the past carries a denoised history: frames are made in order, and
   // a frame's result must not depend on how far its successors have got.
@@ -437,18 +435,20 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
   const bool withHistory =
       std::any_of(still.pixels.begin(), still.pixels.end(), [](float w) { return w > 0.0f; });
   motion::Resampling plan =
-      motion::planResampling(neighbour.guides, positions, current.guides, options.trust);
+      motion::planResampling(neighbour.guides.toGuides(), positions, centre.guides, options.trust);
+  Image denoisedScratch, noisyScratch;
+  const Image& denoised = neighbour.denoised.floats(denoisedScratch);
   Image moved = motion::resample(
-      plan, withHistory ? stacked(neighbour.denoised, neighbour.history) : neighbour.denoised);
+      plan, withHistory ? stacked(denoised, neighbour.history.toImage()) : denoised);
   if (withHistory) {
     out.history = channelsOf(moved, 3, 3);
     out.historyWeight = std::move(still);
     moved = channelsOf(moved, 0, 3);
   }
   const Image& trust = plan.trust;
-  const Image neighbourNoisy = tonemapped(neighbour.noisy, centre.scale);
+  const Image neighbourNoisy = tonemapped(neighbour.noisy.floats(noisyScratch), centre.scale);
   const Image residual = motion::reprojectNearest(
-      difference(neighbourNoisy, tonemapped(neighbour.denoised, centre.scale)), positions);
+      difference(neighbourNoisy, tonemapped(denoised, centre.scale)), positions);
   if (correlation(centre.residual, residual, trust) > options.repeatedNoiseCorrelation) {
     out.verdict = Contribution::Verdict::RepeatedNoise;
     return out;
@@ -468,7 +468,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
   if (fullSpread > options.changedLightSpread ||
       trustedMean(light, trust) > options.changedLightMean) {
     out.relight =
-        relightFactor(out.image, current.denoised, trust, options.relightBox, options.relightRange);
+        relightFactor(out.image, centre.denoised, trust, options.relightBox, options.relightRange);
     out.image = scaled(std::move(out.image), out.relight);
     if (!out.history.empty()) out.history = scaled(std::move(out.history), out.relight);
     relitTrust = trust;
@@ -589,7 +589,7 @@ Image guideMean(const Centre& centre, const std::vector<Contribution>& contribut
     trust.emplace_back(t.pixels.begin(), t.pixels.end());
     others.push_back({&k.image, &trust.back()});
   }
-  const Image& own = centre.frame->denoised;
+  const Image& own = centre.denoised;
   return tonemapped(toImage(weightedMean(own, others, threads).value, own), centre.scale);
 }
 
@@ -673,19 +673,20 @@ void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
 void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowFrame*>& frames,
                      const std::vector<Contribution>& contributions, int threads,
                      TemporalResult& result) {
-  const Image& own = current.noisy;
+  Image ownScratch, noisyScratch;
+  const Image& own = current.noisy.floats(ownScratch);
   const std::size_t n = own.pixelCount();
   std::vector<double> sum(own.pixels.begin(), own.pixels.end());
   std::vector<double> weight(n, 1.0), squares(n, 1.0);
-  // Over bands of rows, each pixel summed in the neighbours' order; `moved`
-  // holds one neighbour's render at a time in each band's rows.
+  // Each pixel summed in the neighbours' order, over bands of rows; `moved`
+  // holds one neighbour's render at a time (unpacked one at a time).
   Image moved(own.width, own.height, 3);
-  forBands(own.height, threads, [&](std::size_t y0, std::size_t y1) {
-    for (std::size_t k = 0; k < contributions.size(); ++k) {
-      const Contribution& c = contributions[k];
-      if (c.weight.empty()) continue;
-      motion::reprojectNearestRows(frames[k]->noisy, c.resampling.positions, int(y0), int(y1),
-                                   moved);
+  for (std::size_t k = 0; k < contributions.size(); ++k) {
+    const Contribution& c = contributions[k];
+    if (c.weight.empty()) continue;
+    const Image& noisy = frames[k]->noisy.floats(noisyScratch);
+    forBands(own.height, threads, [&](std::size_t y0, std::size_t y1) {
+      motion::reprojectNearestRows(noisy, c.resampling.positions, int(y0), int(y1), moved);
       for (std::size_t i = y0 * own.width; i < y1 * own.width; ++i) {
         const double w = c.weight[i];
         if (w <= 0.0) continue;
@@ -696,10 +697,10 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
           sum[3 * i + ch] += w * value;
         }
       }
-    }
-  });
-  result.history = Image(current.noisy.width, current.noisy.height, 3);
-  result.historyFrames = Image(current.noisy.width, current.noisy.height, 1);
+    });
+  }
+  result.history = Image(own.width, own.height, 3);
+  result.historyFrames = Image(own.width, own.height, 1);
   double total = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     for (int ch = 0; ch < 3; ++ch)
@@ -765,21 +766,25 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     Image positions;  // where each pixel of the frame is in it
   };
   std::vector<Neighbour> neighbours;
-  std::vector<std::vector<motion::FrameGeometry>> chains;  // per side, from the frame out
+  std::vector<std::vector<const WindowMotion*>> chains;  // per side, from the frame out
   for (int side : {-1, 1}) {
-    std::vector<motion::FrameGeometry> chain = {geometryOf(current)};
+    std::vector<const WindowMotion*> chain = {&current.motion};
     for (int k = 1; k <= options.radius; ++k) {
       const long index = static_cast<long>(centre) + side * k;
       if (index < 0 || index >= static_cast<long>(window.size()) || !window[index]) break;
       if (window[index]->motion.empty() || current.motion.empty()) break;
-      chain.push_back(geometryOf(*window[index]));
+      chain.push_back(&window[index]->motion);
       neighbours.push_back({window[index], static_cast<std::size_t>(index), side > 0, {}});
     }
     chains.push_back(std::move(chain));
   }
   forEach(chains.size(), options.threads, [&](std::size_t side) {
     if (chains[side].size() < 2) return;
-    std::vector<Image> along = motion::chainPositionsAlong(chains[side], side == 1, options.trust);
+    std::vector<motion::MotionField> fields;  // in floats while the chain is followed
+    for (const WindowMotion* m : chains[side]) fields.push_back(m->toField());
+    std::vector<motion::FrameGeometry> chain;
+    for (const motion::MotionField& field : fields) chain.push_back({nullptr, &field});
+    std::vector<Image> along = motion::chainPositionsAlong(chain, side == 1, options.trust);
     const std::size_t first = side == 0 ? 0 : chains[0].size() - 1;
     for (std::size_t k = 0; k < along.size(); ++k)
       neighbours[first + k].positions = std::move(along[k]);
@@ -802,16 +807,17 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     });
   }
   const Image referenceMapped = tonemapped(
-      colourReference(current.denoised, contributions, options.colourReference, options.threads),
+      colourReference(c.denoised, contributions, options.colourReference, options.threads),
       c.scale);
+  const Image viewDependent = current.viewDependent.toImage();
   forEach(contributions.size(), options.threads, [&](std::size_t n) {
     applyColourTest(contributions[n], referenceMapped, c, options);
     if (options.learnedTrust && !features[n].empty())
       applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
-    applyViewDependence(contributions[n], current.viewDependent, options.viewDependentMotion);
+    applyViewDependence(contributions[n], viewDependent, options.viewDependentMotion);
   });
   if (options.observeTrust) {
-    TrustSamples samples{current.denoised, c.scale, {}, {}, {}, {}};
+    TrustSamples samples{c.denoised, c.scale, {}, {}, {}, {}};
     for (std::size_t n = 0; n < contributions.size(); ++n) {
       if (features[n].empty()) continue;
       samples.frames.push_back(neighbours[n].index);
@@ -822,11 +828,11 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     options.observeTrust(samples);
   }
   forEach(contributions.size(), options.threads,
-          [&](std::size_t n) { applyDrift(contributions[n], current.denoised, options); });
+          [&](std::size_t n) { applyDrift(contributions[n], c.denoised, options); });
 
-  const WeightedMean mean = weightedMean(current.denoised, contributions, options.threads);
+  const WeightedMean mean = weightedMean(c.denoised, contributions, options.threads);
   TemporalResult result;
-  result.color = toImage(mean.value, current.denoised);
+  result.color = toImage(mean.value, c.denoised);
   result.stats.neighbours = static_cast<int>(neighbours.size());
   for (const Contribution& k : contributions) {
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;

@@ -161,9 +161,17 @@ class Sequence {
   // Makes the denoised histories of the frames within the window before `number`
   // that lack one.
   void makePastHistories(int number, const Read& read, const Denoise& denoise);
+  // A companion as the window holds it: its render in half floats where the
+  // file had it so, its image once the frame is in the past.
+  struct HeldCompanion {
+    WindowImage image, render;
+    bool overTime = true, viewDependent = false;
+  };
+  using HeldCompanions = std::map<std::string, HeldCompanion>;
   // Frame `number`'s companions, made by `make` (from `given`, or the frame
   // as the window holds it) if not yet.
-  const Companions& companionsOf(int number, const FrameBuffers* given, const CompanionMaker& make);
+  const HeldCompanions& companionsOf(int number, const FrameBuffers* given,
+                                     const CompanionMaker& make);
   // The companions filtered over the window, and those with a render
   // accumulated (by name).
   struct FilteredCompanions {

@@ -20,23 +20,54 @@
 #include "dn/motion/motion.h"
 #include "dn/motion/reproject.h"
 #include "dn/temporal/learned_trust.h"
+#include "dn/temporal/window_image.h"
 
 namespace dn::temporal {
 
+// A frame's albedo, normal and depth as the window holds them.
+struct WindowGuides {
+  WindowImage albedo, normal, depth;
+  WindowGuides() = default;
+  WindowGuides(motion::Guides guides)  // held in floats, as given
+      : albedo(std::move(guides.albedo)),
+        normal(std::move(guides.normal)),
+        depth(std::move(guides.depth)) {}
+  motion::Guides toGuides() const { return {albedo.toImage(), normal.toImage(), depth.toImage()}; }
+};
+
+// A frame's motion as the window holds it.
+struct WindowMotion {
+  WindowImage toPrevious, toNext;
+  std::string source;
+  bool mirrored = false;
+  WindowMotion() = default;
+  WindowMotion(motion::MotionField field)  // held in floats, as given
+      : toPrevious(std::move(field.toPrevious)),
+        toNext(std::move(field.toNext)),
+        source(std::move(field.source)),
+        mirrored(field.mirrored) {}
+  bool empty() const { return toPrevious.empty() || toNext.empty(); }
+  motion::MotionField toField() const {
+    return {toPrevious.toImage(), toNext.toImage(), source, mirrored};
+  }
+};
+
 // One frame of the window: the denoised result, the noisy render (for the
 // noise level, the light and the repeated-noise tests), its guides and motion.
+// A sequence packs them in half floats where that loses nothing the filter
+// can tell (Sequence); the centre frame's result stays in floats.
 struct WindowFrame {
-  Image denoised;  // 3 channels, linear
-  Image noisy;     // 3 channels, linear
+  WindowImage denoised;  // 3 channels, linear
+  WindowImage noisy;     // 3 channels, linear
   // Its accumulated render, denoised (TemporalResult::history, denoised);
   // empty until made. The past frames' are averaged into the frame's own.
-  Image history;
-  motion::Guides guides;
-  motion::MotionField motion;
+  WindowImage history;
+  WindowGuides guides;
+  WindowMotion motion;
   // Per pixel, the share of the render's light that moves with the view, not
   // the surface (reflected and refracted: a renderer's glossy and
   // transmission passes); 1 channel in [0, 1], empty where unknown.
-  Image viewDependent;
+  WindowImage viewDependent;
 };
 
 // What the learned trust sees of a frame's neighbours, for fitting it

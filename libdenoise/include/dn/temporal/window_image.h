@@ -1,0 +1,58 @@
+// An image of a sequence's window, in floats or packed in half floats (IEEE
+// binary16). The window holds nine frames; packed, a 1080p frame's noisy
+// render, albedo, past result and history take half the memory.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "dn/image.h"
+
+namespace dn::temporal {
+
+class WindowImage {
+ public:
+  WindowImage() = default;
+  WindowImage(Image image) : floats_(std::move(image)) {}  // held in floats, as given
+
+  // Packs into half floats where that changes no value (a half-float file's
+  // render and guides, so the frame's buffers come back bit for bit); else
+  // keeps the floats.
+  void packIfExact();
+  // Packs into half floats rounded to the nearest, after a power-of-two scale
+  // that brings the largest magnitude to the top of half's range: 11
+  // significant bits wherever a value is within 2^-14 of the largest. Keeps
+  // the floats where a value is not finite.
+  void pack();
+
+  bool packed() const { return !halves_.empty(); }
+  bool empty() const { return floats_.empty() && halves_.empty(); }
+  int width() const { return floats_.width; }
+  int height() const { return floats_.height; }
+  int channels() const { return floats_.channels; }
+  std::size_t pixelCount() const { return floats_.pixelCount(); }
+  bool sameShape(const Image& image) const { return floats_.sameShape(image); }
+  bool sameShape(const WindowImage& image) const { return floats_.sameShape(image.floats_); }
+  std::size_t bytes() const;
+
+  // The image in floats: itself where held so, else unpacked into `scratch`.
+  const Image& floats(Image& scratch) const;
+  Image toImage() const;
+  // The image itself, to build a frame with; throws std::logic_error where packed.
+  Image& floats();
+  const Image& floats() const;
+
+ private:
+  Image floats_;                       // the image; packed, its shape with no pixels
+  std::vector<std::uint16_t> halves_;  // packed: the values times 2^exponent_
+  int exponent_ = 0;
+};
+
+// IEEE binary16 conversions, on F16C where the processor has it (the same
+// bits either way): round to nearest, ties to even.
+std::uint16_t halfOf(float value);
+float floatOf(std::uint16_t half);
+void toHalves(const float* in, std::size_t count, float scale, std::uint16_t* out);
+void toFloats(const std::uint16_t* in, std::size_t count, float scale, float* out);
+
+}  // namespace dn::temporal
