@@ -54,8 +54,8 @@ struct WindowMotion {
 
 // One frame of the window: the denoised result, the noisy render (for the
 // noise level, the light and the repeated-noise tests), its guides and motion.
-// A sequence packs them in half floats where that loses nothing the filter
-// can tell (Sequence); the centre frame's result stays in floats.
+// A sequence holds them in half floats where it can (Sequence); the result of
+// the frame filtered stays in floats.
 struct WindowFrame {
   WindowImage denoised;  // 3 channels, linear
   WindowImage noisy;     // 3 channels, linear

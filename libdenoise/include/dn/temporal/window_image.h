@@ -21,8 +21,8 @@ class WindowImage {
   void packIfExact();
   // Packs into half floats rounded to the nearest, after a power-of-two scale
   // that brings the largest magnitude to the top of half's range: 11
-  // significant bits wherever a value is within 2^-14 of the largest. Keeps
-  // the floats where a value is not finite.
+  // significant bits for every value down to 2^-28 of the largest. Keeps the
+  // floats where a value is not finite.
   void pack();
 
   bool packed() const { return !halves_.empty(); }
