@@ -317,6 +317,60 @@ TEST_CASE("cubic resampling keeps a texture's edges sharper than bilinear, never
   CHECK(edge.image.at(21, 8, 0) != edgeBilinear.image.at(21, 8, 0));
 }
 
+TEST_CASE("images resampled together are their channels stacked, bit for bit") {
+  // A smooth image and a step from black: Catmull-Rom overshoots below 0 on
+  // the step's dark side, and there both images fall back to bilinear.
+  const int w = 32, h = 12;
+  Image smooth(w, h, 3), step(w, h, 2), stacked(w, h, 5);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) smooth.at(x, y, c) = 1.0f + 0.3f * std::sin(0.4f * x + c + y);
+      for (int c = 0; c < 2; ++c) step.at(x, y, c) = x < w / 2 ? 0.0f : 1.0f + c;
+      for (int c = 0; c < 5; ++c)
+        stacked.at(x, y, c) = c < 3 ? smooth.at(x, y, c) : step.at(x, y, c - 3);
+    }
+  Image positions(w, h, 2);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) positions.at(x, y, 0) = x + 0.5f, positions.at(x, y, 1) = y + 0.25f;
+  const Guides g = guides(makeFrame(w, h, 0, 0));
+  const Resampling plan = planResampling(g, positions, g);
+  const std::vector<Image> together = resample(plan, {&smooth, &step});
+  const Image reference = resample(plan, stacked);
+  REQUIRE(together.size() == 2);
+  for (std::size_t i = 0; i < reference.pixelCount(); ++i)
+    for (int c = 0; c < 5; ++c) {
+      const float value = c < 3 ? together[0].pixels[3 * i + c] : together[1].pixels[2 * i + c - 3];
+      CHECK(std::memcmp(&value, &reference.pixels[5 * i + c], sizeof value) == 0);
+    }
+  // Left of the step the smooth image alone keeps Catmull-Rom; together it does not.
+  const int x = w / 2 - 2, y = h / 2;
+  CHECK(resample(plan, smooth).at(x, y, 0) != together[0].at(x, y, 0));
+  CHECK(resample(plan, smooth).at(2, y, 0) == together[0].at(2, y, 0));
+}
+
+TEST_CASE("nearest-pixel reprojection rounds halves away from zero and clamps to the frame") {
+  const int w = 7, h = 5;
+  Image source(w, h, 1);
+  for (std::size_t i = 0; i < source.pixels.size(); ++i) source.pixels[i] = static_cast<float>(i);
+  const float below = std::nextafter(0.5f, 0.0f), above = std::nextafter(0.5f, 1.0f);
+  const std::vector<float> xs = {-3.0f, -0.5f, -below, 0.0f,     below,     0.5f,  above,
+                                 2.5f,  3.5f,  5.49f,  w - 0.5f, w - below, 40.0f, 1e30f};
+  Image positions(static_cast<int>(xs.size()), 1, 2);
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    positions.pixels[2 * i] = xs[i];
+    positions.pixels[2 * i + 1] = xs[i] / 2;
+  }
+  const Image moved = reprojectNearest(source, positions);
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    auto index = [](float v, int size) {  // the reference: std::lround, clamped
+      const double r = std::abs(v) > 1e9f ? (v > 0 ? 1e9 : -1e9) : double(std::lround(v));
+      return static_cast<int>(std::clamp(r, 0.0, double(size - 1)));
+    };
+    CAPTURE(xs[i]);
+    CHECK(moved.pixels[i] == source.at(index(xs[i], w), index(xs[i] / 2, h), 0));
+  }
+}
+
 namespace {
 
 // A still shot's frame: truth plus noise (seeded), "denoised" as truth plus a

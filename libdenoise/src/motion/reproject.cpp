@@ -16,82 +16,123 @@ bool onScreen(float x, float y, int width, int height) {
   return x >= -0.5f && y >= -0.5f && x <= width - 0.5f && y <= height - 0.5f;
 }
 
+// std::lround(v) clamped to [0, size): halves away from zero, without a call.
 int nearest(float v, int size) {
-  const int i = static_cast<int>(std::lround(v));
-  return i < 0 ? 0 : (i >= size ? size - 1 : i);
+  if (!(v >= 0.5f)) return 0;  // also NaN
+  if (v >= size - 0.5f) return size - 1;
+  const int i = static_cast<int>(v);  // v - i is exact below 2^24
+  return v - static_cast<float>(i) >= 0.5f ? i + 1 : i;
 }
 
-// A frame's guides and each pixel's normal length: the normal test compares
-// directions at every tap, so the lengths are taken once per plan.
+// The guide if present: null where absent or empty.
+const Image* present(const Image* guide) { return guide && !guide->empty() ? guide : nullptr; }
+
+// A frame's guides (null where absent) and each pixel's normal length: the
+// normal test compares directions at every tap, so the lengths are taken
+// once per plan.
 struct Surface {
-  const Guides& guides;
+  const Image *albedo, *normal, *depth;
   std::vector<float> normalLength;
-  explicit Surface(const Guides& g) : guides(g), normalLength(g.normal.pixelCount()) {
+  explicit Surface(const GuideImages& g)
+      : albedo(present(g.albedo)), normal(present(g.normal)), depth(present(g.depth)) {
+    if (!normal) return;
+    normalLength.resize(normal->pixelCount());
     for (std::size_t i = 0; i < normalLength.size(); ++i) {
-      const float* n = &g.normal.pixels[3 * i];
+      const float* n = &normal->pixels[3 * i];
       normalLength[i] = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     }
   }
 };
 
-// Whether pixel `s` of the source and pixel `c` of the current frame see the
-// same surface by depth, by normal, by albedo.
-bool sameDepth(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
-               const TrustOptions& o) {
-  const float zs = source.guides.depth.pixels[s], zc = current.guides.depth.pixels[c];
-  return std::abs(zs - zc) <= o.depthRelative * std::max(std::abs(zc), 1e-6f);
+// showsEnvironment, by a depth guide that may be null.
+bool environmentAt(const Image* depth, std::size_t pixel) {
+  if (!depth) return false;
+  const float z = depth->pixels[pixel];
+  return z == 0.0f || !(std::abs(z) < 1e9f);  // also infinite or NaN
 }
 
-bool sameNormal(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
-                const TrustOptions& o) {
-  const float* ns = &source.guides.normal.pixels[3 * s];
-  const float* nc = &current.guides.normal.pixels[3 * c];
-  const double ls = source.normalLength[s], lc = current.normalLength[c];
+// A pixel of the current frame as the guide tests compare source taps with
+// it, its values taken once for all of a pixel's taps.
+struct Target {
+  float depth = 0.0f;
+  double depthLimit = 0.0;  // the largest depth difference of the same surface
+  const float* normal = nullptr;
+  double normalLength = 0.0;
+  const float* albedo = nullptr;
+};
+
+Target targetOf(const Surface& current, std::size_t c, const TrustOptions& o) {
+  Target t;
+  if (current.depth) {
+    t.depth = current.depth->pixels[c];
+    t.depthLimit = o.depthRelative * std::max(std::abs(t.depth), 1e-6f);
+  }
+  if (current.normal)
+    t.normal = &current.normal->pixels[3 * c], t.normalLength = current.normalLength[c];
+  if (current.albedo) t.albedo = &current.albedo->pixels[3 * c];
+  return t;
+}
+
+// Whether pixel `s` of the source and the target see the same surface by
+// depth, by normal, by albedo.
+bool sameDepth(const Surface& source, std::size_t s, const Target& t, const TrustOptions&) {
+  return std::abs(source.depth->pixels[s] - t.depth) <= t.depthLimit;
+}
+
+bool sameNormal(const Surface& source, std::size_t s, const Target& t, const TrustOptions& o) {
+  const float* ns = &source.normal->pixels[3 * s];
+  const float* nc = t.normal;
+  const double ls = source.normalLength[s], lc = t.normalLength;
   if ((ls < 1e-3) != (lc < 1e-3)) return false;  // surface against background
   return ls < 1e-3 || (ns[0] * nc[0] + ns[1] * nc[1] + ns[2] * nc[2]) >= o.normalCosine * ls * lc;
 }
 
-bool sameAlbedo(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
-                const TrustOptions& o) {
+bool sameAlbedo(const Surface& source, std::size_t s, const Target& t, const TrustOptions& o) {
   for (int ch = 0; ch < 3; ++ch) {
-    const float as = source.guides.albedo.pixels[3 * s + ch];
-    const float ac = current.guides.albedo.pixels[3 * c + ch];
+    const float as = source.albedo->pixels[3 * s + ch], ac = t.albedo[ch];
     if (std::abs(as - ac) > o.albedoAbsolute + o.albedoRelative * std::max(as, ac)) return false;
   }
   return true;
 }
 
-// A guide test passed at the current pixel or at a pixel within
-// `neighbourhood` of it. An edge pixel's guides blend two surfaces by a coverage that
-// every frame's anti-aliasing samples change, so the tap is compared with each
-// surface seen around it, not with this frame's blend alone. (A template, so
-// that the test is inlined: this runs for every tap of every pixel.)
+// Which guide tests apply: those whose guide both frames have.
+struct GuideTests {
+  bool depth, normal, albedo;
+  GuideTests(const Surface& a, const Surface& b)
+      : depth(a.depth && b.depth), normal(a.normal && b.normal), albedo(a.albedo && b.albedo) {}
+};
+
+// A guide test passed at the target (current pixel `c`) or at a pixel within
+// `neighbourhood` of it. An edge pixel's guides blend two surfaces by a
+// coverage that every frame's anti-aliasing samples change, so the tap is
+// compared with each surface seen around it, not with this frame's blend
+// alone. (A template, so that the test is inlined: this runs for every tap
+// of every pixel.)
 template <class GuideTest>
-bool matchesAround(GuideTest test, const Surface& source, std::size_t s, const Surface& current,
-                   std::size_t c, int width, int height, const TrustOptions& o) {
-  if (test(source, s, current, c, o)) return true;
+bool matchesAround(GuideTest test, const Surface& source, std::size_t s, const Target& target,
+                   const Surface& current, std::size_t c, int width, int height,
+                   const TrustOptions& o) {
+  if (test(source, s, target, o)) return true;
   const int r = o.neighbourhood, cx = static_cast<int>(c % width), cy = static_cast<int>(c / width);
   for (int y = std::max(0, cy - r); y <= std::min(height - 1, cy + r); ++y)
     for (int x = std::max(0, cx - r); x <= std::min(width - 1, cx + r); ++x) {
       const std::size_t k = static_cast<std::size_t>(y) * width + x;
-      if (k != c && test(source, s, current, k, o)) return true;
+      if (k != c && test(source, s, targetOf(current, k, o), o)) return true;
     }
   return false;
 }
 
 // Whether source pixel `s` shows a surface seen at or around current pixel
-// `c`, by every guide both frames have (albedo only when `byAlbedo`).
-bool sameSurface(const Surface& source, std::size_t s, const Surface& current, std::size_t c,
-                 int width, int height, const TrustOptions& o, bool byAlbedo = true) {
-  auto has = [](const Image& a, const Image& b) { return !a.empty() && !b.empty(); };
-  if (has(source.guides.depth, current.guides.depth) &&
-      !matchesAround(sameDepth, source, s, current, c, width, height, o))
+// `c` (the target), by every guide both frames have (albedo only when `byAlbedo`).
+bool sameSurface(const Surface& source, std::size_t s, const Target& target, const Surface& current,
+                 std::size_t c, const GuideTests& tests, int width, int height,
+                 const TrustOptions& o, bool byAlbedo = true) {
+  if (tests.depth && !matchesAround(sameDepth, source, s, target, current, c, width, height, o))
     return false;
-  if (has(source.guides.normal, current.guides.normal) &&
-      !matchesAround(sameNormal, source, s, current, c, width, height, o))
+  if (tests.normal && !matchesAround(sameNormal, source, s, target, current, c, width, height, o))
     return false;
-  return !byAlbedo || !has(source.guides.albedo, current.guides.albedo) ||
-         matchesAround(sameAlbedo, source, s, current, c, width, height, o);
+  return !byAlbedo || !tests.albedo ||
+         matchesAround(sameAlbedo, source, s, target, current, c, width, height, o);
 }
 
 // Catmull-Rom's weights of the taps at offsets -1, 0, 1, 2 from floor(q).
@@ -105,9 +146,9 @@ std::array<double, 4> catmullRom(double t) {
 // screen and show the destination's surface by depth and normal (a texture's
 // edges within one surface are what it keeps sharp). The bilinear taps in
 // `matched` (Resampling::taps' bits) passed those tests already.
-bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Surface& currentGuides,
-                    std::size_t here, int width, int height, const TrustOptions& options,
-                    unsigned char matched) {
+bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Target& target,
+                    const Surface& currentGuides, std::size_t here, const GuideTests& tests,
+                    int width, int height, const TrustOptions& options, unsigned char matched) {
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
   if (x0 < 0 || y0 < 0 || x0 + 3 >= width || y0 + 3 >= height) return false;
   for (int j = 0; j < 4; ++j)
@@ -116,30 +157,39 @@ bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Surfa
       const bool middle = (i == 1 || i == 2) && (j == 1 || j == 2);
       if (middle && (matched & (1u << ((i - 1) + 2 * (j - 1))))) continue;
       const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
-      if (!sameSurface(sourceGuides, tap, currentGuides, here, width, height, options, false))
+      if (!sameSurface(sourceGuides, tap, target, currentGuides, here, tests, width, height,
+                       options, false))
         return false;
     }
   return true;
 }
 
-// The source resampled at (qx, qy) by Catmull-Rom into `out`, whose taps
-// cubicTapsMatch allowed; false, with `out` untouched, where a value would be
-// negative (an overshoot at a dark edge).
-bool cubicSample(const Image& source, float qx, float qy, float* out) {
-  const int width = source.width, channels = source.channels;
+// The sources resampled at (qx, qy) by Catmull-Rom into `out` (each
+// source's channels at its own pointer), whose taps cubicTapsMatch allowed;
+// false, with `out` untouched, where a value of any would be negative (an
+// overshoot at a dark edge) or they hold more than 8 channels together.
+bool cubicSample(const std::vector<const Image*>& sources, float qx, float qy,
+                 const std::vector<float*>& out) {
+  const int width = sources.front()->width;
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
+  int channels = 0;
+  for (const Image* source : sources) channels += source->channels;
   if (channels > 8) return false;
   const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
   std::array<double, 8> sum = {};
   for (int j = 0; j < 4; ++j)
     for (int i = 0; i < 4; ++i) {
       const std::size_t tap = static_cast<std::size_t>(y0 + j) * width + x0 + i;
-      for (int c = 0; c < channels; ++c)
-        sum[c] += wx[i] * wy[j] * source.pixels[tap * channels + c];
+      double* to = sum.data();
+      for (const Image* source : sources)
+        for (int c = 0; c < source->channels; ++c)
+          *to++ += wx[i] * wy[j] * source->pixels[tap * source->channels + c];
     }
   for (int c = 0; c < channels; ++c)
     if (sum[c] < 0.0) return false;
-  for (int c = 0; c < channels; ++c) out[c] = static_cast<float>(sum[c]);
+  const double* from = sum.data();
+  for (std::size_t k = 0; k < sources.size(); ++k)
+    for (int c = 0; c < sources[k]->channels; ++c) out[k][c] = static_cast<float>(*from++);
   return true;
 }
 
@@ -147,24 +197,30 @@ bool cubicSample(const Image& source, float qx, float qy, float* out) {
 constexpr unsigned char kCubicTaps = 1u << 4;
 constexpr unsigned char kBroughtIn = 1u << 5;
 
-// Bilinear tap t (0-3) of the pixel at (qx, qy): its index and weight; the
-// weight is 0 where the tap is off the image.
-struct Tap {
-  std::size_t index;
-  double weight;
+// The four bilinear taps of the pixel at (qx, qy), in the order of
+// Resampling::taps' bits: each one's index and weight; the weight is 0 where
+// the tap is off the image.
+struct BilinearTaps {
+  std::array<std::size_t, 4> index;
+  std::array<double, 4> weight;
 };
-Tap bilinearTap(float qx, float qy, int t, int width, int height) {
+inline BilinearTaps bilinearTaps(float qx, float qy, int width, int height) {
   const int x0 = static_cast<int>(std::floor(qx)), y0 = static_cast<int>(std::floor(qy));
   const float fx = qx - x0, fy = qy - y0;
-  const int tx = x0 + (t & 1), ty = y0 + (t >> 1);
-  const double w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
-  if (w <= 0.0 || tx < 0 || ty < 0 || tx >= width || ty >= height) return {0, 0.0};
-  return {static_cast<std::size_t>(ty) * width + tx, w};
+  BilinearTaps taps{};
+  for (int t = 0; t < 4; ++t) {
+    const int tx = x0 + (t & 1), ty = y0 + (t >> 1);
+    const double w = ((t & 1) ? fx : 1.0f - fx) * ((t >> 1) ? fy : 1.0f - fy);
+    if (w <= 0.0 || tx < 0 || ty < 0 || tx >= width || ty >= height) continue;
+    taps.index[t] = static_cast<std::size_t>(ty) * width + tx;
+    taps.weight[t] = w;
+  }
+  return taps;
 }
 
-void checkGuides(const Guides& g, int width, int height) {
-  for (const Image* image : {&g.albedo, &g.normal, &g.depth})
-    if (!image->empty() && (image->width != width || image->height != height))
+void checkGuides(const GuideImages& g, int width, int height) {
+  for (const Image* image : {g.albedo, g.normal, g.depth})
+    if (present(image) && (image->width != width || image->height != height))
       throw std::invalid_argument("reproject: a guide is not the frame's size");
 }
 
@@ -212,8 +268,8 @@ Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
   return std::move(chainPositionsAlong(chain, forward, options).back());
 }
 
-Resampling planResampling(const Guides& sourceGuides, const Image& positions,
-                          const Guides& currentGuides, const TrustOptions& options) {
+Resampling planResampling(const GuideImages& sourceGuides, const Image& positions,
+                          const GuideImages& currentGuides, const TrustOptions& options) {
   const int width = positions.width, height = positions.height;
   if (positions.channels != 2) throw std::invalid_argument("reproject: positions need 2 channels");
   checkGuides(sourceGuides, width, height);
@@ -221,19 +277,21 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
   Resampling plan{positions, std::vector<unsigned char>(positions.pixelCount(), 0),
                   Image(width, height, 1)};
   const Surface source(sourceGuides), current(currentGuides);
+  const GuideTests tests(source, current);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
       const std::size_t here = static_cast<std::size_t>(y) * width + x;
       const float qx = positions.at(x, y, 0), qy = positions.at(x, y, 1);
-      if (std::isnan(qx) || std::isnan(qy) || showsEnvironment(currentGuides, here)) continue;
+      if (std::isnan(qx) || std::isnan(qy) || environmentAt(current.depth, here)) continue;
       double accepted = 0.0;
       unsigned char taps = 0;
+      const Target target = targetOf(current, here, options);
+      const BilinearTaps bilinear = bilinearTaps(qx, qy, width, height);
       for (int t = 0; t < 4; ++t) {
-        const Tap tap = bilinearTap(qx, qy, t, width, height);
-        if (tap.weight <= 0.0 ||
-            !sameSurface(source, tap.index, current, here, width, height, options))
+        if (bilinear.weight[t] <= 0.0 || !sameSurface(source, bilinear.index[t], target, current,
+                                                      here, tests, width, height, options))
           continue;
-        accepted += tap.weight;
+        accepted += bilinear.weight[t];
         taps |= static_cast<unsigned char>(1u << t);
       }
       if (accepted < options.minCoverage) continue;
@@ -244,7 +302,8 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
       const float fy = qy - static_cast<int>(std::floor(qy));
       const bool whole = (fx == 0.0f || fx == 1.0f) && (fy == 0.0f || fy == 1.0f);
       if (options.cubic && !whole && accepted > 0.999 &&
-          cubicTapsMatch(source, qx, qy, current, here, width, height, options, taps))
+          cubicTapsMatch(source, qx, qy, target, current, here, tests, width, height, options,
+                         taps))
         taps |= kCubicTaps;
       plan.taps[here] = taps;
       plan.trust.pixels[here] = static_cast<float>(std::min(1.0, accepted));
@@ -252,31 +311,42 @@ Resampling planResampling(const Guides& sourceGuides, const Image& positions,
   return plan;
 }
 
-Image resample(const Resampling& plan, const Image& source) {
+std::vector<Image> resample(const Resampling& plan, const std::vector<const Image*>& sources) {
   const int width = plan.positions.width, height = plan.positions.height;
-  const int channels = source.channels;
-  if (source.width != width || source.height != height)
-    throw std::invalid_argument("reproject: source and positions differ in size");
-  Image out(width, height, channels);
-  std::vector<double> sum(channels);
+  std::vector<Image> out;
+  for (const Image* source : sources) {
+    if (source->width != width || source->height != height)
+      throw std::invalid_argument("reproject: source and positions differ in size");
+    out.emplace_back(width, height, source->channels);
+  }
+  std::vector<float*> value(sources.size());
   for (std::size_t here = 0; here < plan.taps.size(); ++here) {
     const unsigned char taps = plan.taps[here];
     if (!(taps & kBroughtIn)) continue;
     const float qx = plan.positions.pixels[2 * here], qy = plan.positions.pixels[2 * here + 1];
-    float* value = &out.pixels[here * channels];
-    if ((taps & kCubicTaps) && cubicSample(source, qx, qy, value)) continue;
+    for (std::size_t k = 0; k < sources.size(); ++k)
+      value[k] = &out[k].pixels[here * sources[k]->channels];
+    if ((taps & kCubicTaps) && cubicSample(sources, qx, qy, value)) continue;
+    const BilinearTaps bilinear = bilinearTaps(qx, qy, width, height);
     double accepted = 0.0;
-    std::fill(sum.begin(), sum.end(), 0.0);
-    for (int t = 0; t < 4; ++t) {
-      if (!(taps & (1u << t))) continue;
-      const Tap tap = bilinearTap(qx, qy, t, width, height);
-      accepted += tap.weight;
-      for (int c = 0; c < channels; ++c)
-        sum[c] += tap.weight * source.pixels[tap.index * channels + c];
+    for (int t = 0; t < 4; ++t)
+      if (taps & (1u << t)) accepted += bilinear.weight[t];
+    for (std::size_t k = 0; k < sources.size(); ++k) {
+      const Image& source = *sources[k];
+      for (int c = 0; c < source.channels; ++c) {
+        double sum = 0.0;
+        for (int t = 0; t < 4; ++t)
+          if (taps & (1u << t))
+            sum += bilinear.weight[t] * source.pixels[bilinear.index[t] * source.channels + c];
+        value[k][c] = static_cast<float>(sum / accepted);
+      }
     }
-    for (int c = 0; c < channels; ++c) value[c] = static_cast<float>(sum[c] / accepted);
   }
   return out;
+}
+
+Image resample(const Resampling& plan, const Image& source) {
+  return std::move(resample(plan, std::vector<const Image*>{&source}).front());
 }
 
 Reprojected reproject(const Image& source, const Guides& sourceGuides, const Image& positions,
@@ -289,9 +359,7 @@ Reprojected reproject(const Image& source, const Guides& sourceGuides, const Ima
 }
 
 bool showsEnvironment(const Guides& guides, std::size_t pixel) {
-  if (guides.depth.empty()) return false;
-  const float z = guides.depth.pixels[pixel];
-  return z == 0.0f || !(std::abs(z) < 1e9f);  // also infinite or NaN
+  return environmentAt(present(&guides.depth), pixel);
 }
 
 Image reprojectNearest(const Image& source, const Image& positions) {

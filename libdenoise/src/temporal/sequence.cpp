@@ -25,10 +25,14 @@ const char* const kHeldInWindow[] = {"color", "albedo", "normal", "depth"};
 // (WindowFrame), so a window of 1080p frames holds about 0.12 GB a frame.
 struct Sequence::Input {
   // What the model reads; once denoised, all but the colour, albedo, normal
-  // and depth, which `frame` holds (Sequence::frame puts them back).
+  // and depth, which `frame` holds (Sequence::frame puts them back), and the alpha.
   FrameBuffers buffers;
   std::set<std::string> heldInWindow;  // those of kHeldInWindow `frame` holds as read
-  WindowFrame frame;                   // noisy, guides, motion; denoised
+  // Until the frame is denoised, `buffers` holds those of heldInWindow for the
+  // network, and `frame` takes them after (holdInWindow): not both at once.
+  bool heldInBuffers = false;
+  WindowFrame frame;  // noisy, guides, motion; denoised
+  WindowImage alpha;  // the colour's, in half floats where the file has it so
   // The prefilter's, for denoising the frame's history (rounded to half floats).
   WindowImage cleanAlbedo, cleanNormal;
   std::optional<HeldCompanions> companions;  // once made
@@ -67,6 +71,19 @@ struct Sequence::Input {
   // Drops the buffers the window frame holds too (only readAgain needs them).
   void dropHeld() {
     for (const auto& name : heldInWindow) buffers.buffers.erase(name);
+  }
+  // Once denoised: the window takes the buffers it holds (heldInBuffers), or
+  // they are dropped where it has its copies already.
+  void holdInWindow() {
+    if (!std::exchange(heldInBuffers, false)) return dropHeld();
+    const auto copies = windowCopies();
+    for (std::size_t k = 0; k < copies.size(); ++k) {
+      auto held = buffers.buffers.find(kHeldInWindow[k]);
+      if (!heldInWindow.count(kHeldInWindow[k]) || held == buffers.buffers.end()) continue;
+      *copies[k] = std::move(held->second);
+      copies[k]->packIfExact();
+      buffers.buffers.erase(held);
+    }
   }
 };
 
@@ -188,6 +205,8 @@ std::optional<motion::MotionField> Sequence::motionOf(int number, const std::str
 
 FrameBuffers Sequence::Input::readAgain() const {
   FrameBuffers out = buffers;
+  out.alpha = alpha.toImage();
+  if (heldInBuffers) return out;
   const auto copies = windowCopies();
   for (std::size_t k = 0; k < copies.size(); ++k)
     if (heldInWindow.count(kHeldInWindow[k]))
@@ -225,7 +244,14 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   if (given) {  // kept for Sequence::frame, but for what the window holds
     entry->buffers = *given;
     entry->dropHeld();
+  } else {  // the network reads the buffers first
+    for (std::size_t k = 0; k < copies.size(); ++k)
+      if (entry->heldInWindow.count(kHeldInWindow[k])) *copies[k] = WindowImage();
+    entry->heldInBuffers = true;
   }
+  entry->alpha = std::move(entry->buffers.alpha);
+  entry->alpha.packIfExact();
+  entry->buffers.alpha = Image();
   entry->buffers.extra.clear();
   inputs_[number] = entry;
   return entry;
@@ -247,7 +273,7 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   if (!self) return nullptr;
   auto result =
       std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
-  self->dropHeld();
+  self->holdInWindow();
   self->frame.denoised = std::move(result->color);  // the filter's input, held once
   self->cleanAlbedo = std::move(result->cleanAlbedo);
   self->cleanNormal = std::move(result->cleanNormal);
@@ -272,16 +298,18 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
   std::vector<const WindowFrame*> window;
   std::vector<const DeviceFrame*> deviceWindow;
   for (int m = number - radius; m <= number + radius; ++m) {
+    // Whichever call made them, the filter sees the past frames so (a shot
+    // split into runs gives the same bits); held so before the later frames
+    // are denoised.
+    if (m == number)
+      for (int p = number - radius; p < number; ++p)
+        if (auto past = inputs_.find(p); past != inputs_.end())
+          past->second->enterPast(settings_.filterDevice);
     auto source = estimate(m, nullptr, read, denoise) ? input(m, nullptr, read) : nullptr;
     const bool usable = source && source->frame.denoised.sameShape(own);
     window.push_back(usable ? &source->frame : nullptr);
     if (settings_.filterDevice) deviceWindow.push_back(usable ? &onDevice(*source) : nullptr);
   }
-  // Whichever call made them, the filter sees the past frames so (a shot
-  // split into runs gives the same bits).
-  for (int m = number - radius; m < number; ++m)
-    if (auto past = inputs_.find(m); past != inputs_.end())
-      past->second->enterPast(settings_.filterDevice);
   TemporalOptions options = settings_.filter;
   options.radius = radius;
   if (!settings_.filterDevice) {

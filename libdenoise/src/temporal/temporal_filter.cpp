@@ -122,20 +122,30 @@ class BoxSums {
         integral_(static_cast<std::size_t>(rows_) * (width + 1) * count, 0.0),
         v_(count) {}
 
-  // The box around (x, y) and its pixel count, clipped.
+  // The box around (x, y) and its pixel count, clipped; `top` and `bottom`
+  // point at its corners' integral values in the rows kept.
   struct Box {
     int x0, y0, x1, y1;
+    const double *top0, *top1, *bottom0, *bottom1;  // at (x0, y0), (x1, y0), (x0, y1), (x1, y1)
     int pixels() const { return (x1 - x0) * (y1 - y0); }
   };
   Box box(int x, int y) {
-    const Box b{std::max(0, x - r_), std::max(0, y - r_), std::min(width_, x + r_ + 1),
-                std::min(height_, y + r_ + 1)};
-    while (made_ < b.y1) makeRow();
-    return b;
+    const int x0 = std::max(0, x - r_), y0 = std::max(0, y - r_);
+    const int x1 = std::min(width_, x + r_ + 1), y1 = std::min(height_, y + r_ + 1);
+    while (made_ < y1) makeRow();
+    const double *top = row(y0), *bottom = row(y1);
+    return {x0,
+            y0,
+            x1,
+            y1,
+            top + x0 * count_,
+            top + x1 * count_,
+            bottom + x0 * count_,
+            bottom + x1 * count_};
   }
 
   double sum(const Box& b, int k) const {
-    return at(b.x1, b.y1, k) - at(b.x1, b.y0, k) - at(b.x0, b.y1, k) + at(b.x0, b.y0, k);
+    return b.bottom1[k] - b.top1[k] - b.bottom0[k] + b.top0[k];
   }
 
  private:
@@ -143,17 +153,19 @@ class BoxSums {
   // so is every row's first column).
   void makeRow() {
     const int y = made_++;
+    const double* above = row(y);
+    double* made = row(y + 1);
     for (int x = 0; x < width_; ++x) {
       std::fill(v_.begin(), v_.end(), 0.0);
       values_(static_cast<std::size_t>(y) * width_ + x, v_.data());
       for (int k = 0; k < count_; ++k)
-        at(x + 1, y + 1, k) = v_[k] + at(x + 1, y, k) + at(x, y + 1, k) - at(x, y, k);
+        made[(x + 1) * count_ + k] =
+            v_[k] + above[(x + 1) * count_ + k] + made[x * count_ + k] - above[x * count_ + k];
     }
   }
-  double& at(int x, int y, int k) { return integral_[index(x, y, k)]; }
-  double at(int x, int y, int k) const { return integral_[index(x, y, k)]; }
-  std::size_t index(int x, int y, int k) const {
-    return (static_cast<std::size_t>(y % rows_) * (width_ + 1) + x) * count_ + k;
+  // Integral row y (of the 2r+2 kept) and its values, column after column.
+  double* row(int y) {
+    return &integral_[static_cast<std::size_t>(y % rows_) * (width_ + 1) * count_];
   }
 
   int width_, height_, count_, r_, rows_;
@@ -332,25 +344,6 @@ std::vector<unsigned char> changedPixels(const Image& factor) {
   return out;
 }
 
-// The channels of `a`, then those of `b`, per pixel: reprojected in one call,
-// both are resampled from the same taps.
-Image stacked(const Image& a, const Image& b) {
-  Image out(a.width, a.height, a.channels + b.channels);
-  for (std::size_t i = 0; i < a.pixelCount(); ++i) {
-    std::copy_n(&a.pixels[i * a.channels], a.channels, &out.pixels[i * out.channels]);
-    std::copy_n(&b.pixels[i * b.channels], b.channels, &out.pixels[i * out.channels + a.channels]);
-  }
-  return out;
-}
-
-// Channels [first, first + count) of `image`.
-Image channelsOf(const Image& image, int first, int count) {
-  Image out(image.width, image.height, count);
-  for (std::size_t i = 0; i < image.pixelCount(); ++i)
-    std::copy_n(&image.pixels[i * image.channels + first], count, &out.pixels[i * count]);
-  return out;
-}
-
 // Per pixel, how still its surface stood on screen between the frame and the
 // neighbour at `positions`: 1 where it did not move, falling to 0 at `pixels`.
 Image stillness(const Image& positions, double pixels) {
@@ -371,30 +364,42 @@ Image scaled(Image image, const Image& factor) {
 
 // What the centre frame holds for the tests, computed once per frame.
 struct Centre {
-  Image denoised;            // its result
-  motion::Guides guides;     // its albedo, normal and depth
-  double scale;              // its autoexposure
-  Image mapped;              // its result, tonemapped
-  Image noisyMapped;         // its render, tonemapped
-  Image residual;            // noisyMapped - mapped: its noise, as the denoiser saw it
-  std::vector<float> noise;  // the local level of that noise
+  explicit Centre(const WindowFrame& frame);
+  Centre(const Centre&) = delete;  // `guides` may point into `unpacked`
+  Centre& operator=(const Centre&) = delete;
+  // Once the tests are done only the result, the scale and the noise level
+  // are needed: about 0.1 GB of a 1080p frame less.
+  void dropTestImages() {
+    unpacked = motion::Guides();
+    guides = motion::GuideImages();
+    mapped = noisyMapped = residual = Image();
+  }
+
+  Image denoised;              // its result
+  motion::Guides unpacked;     // its guides held in half floats, in floats
+  motion::GuideImages guides;  // its albedo, normal and depth
+  double scale;                // its autoexposure
+  Image mapped;                // its result, tonemapped
+  Image noisyMapped;           // its render, tonemapped
+  Image residual;              // noisyMapped - mapped: its noise, as the denoiser saw it
+  std::vector<float> noise;    // the local level of that noise
 };
 
-Centre centreOf(const WindowFrame& frame) {
-  Centre c{frame.denoised.toImage(), frame.guides.toGuides(), 1.0, {}, {}, {}, {}};
-  c.scale = tonemap::oidnExposure(c.denoised);
-  c.mapped = tonemapped(c.denoised, c.scale);
+Centre::Centre(const WindowFrame& frame)
+    : denoised(frame.denoised.toImage()),
+      guides(frame.guides.view(unpacked)),
+      scale(tonemap::oidnExposure(denoised)),
+      mapped(tonemapped(denoised, scale)) {
   Image scratch;
-  c.noisyMapped = tonemapped(frame.noisy.floats(scratch), c.scale);
-  c.residual = difference(c.noisyMapped, c.mapped);
-  c.noise = localNoise(c.residual, 3);
+  noisyMapped = tonemapped(frame.noisy.floats(scratch), scale);
+  residual = difference(noisyMapped, mapped);
+  noise = localNoise(residual, 3);
   // A floor: flat, noise-free regions (a clear sky) must not divide by zero.
-  std::vector<float> sorted = c.noise;
+  std::vector<float> sorted = noise;
   auto middle = sorted.begin() + sorted.size() / 2;
   std::nth_element(sorted.begin(), middle, sorted.end());
   const float floor = std::max(0.1f * *middle, 1e-4f);
-  for (float& v : c.noise) v = std::max(v, floor);
-  return c;
+  for (float& v : noise) v = std::max(v, floor);
 }
 
 // One neighbour's result brought into the centre frame, with a weight per
@@ -434,16 +439,24 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
   if (!forward && !neighbour.history.empty()) still = stillness(positions, options.historyMotion);
   const bool withHistory =
       std::any_of(still.pixels.begin(), still.pixels.end(), [](float w) { return w > 0.0f; });
-  motion::Resampling plan =
-      motion::planResampling(neighbour.guides.toGuides(), positions, centre.guides, options.trust);
+  motion::Resampling plan = [&] {
+    motion::Guides unpacked;  // those held in half floats, while planned
+    return motion::planResampling(neighbour.guides.view(unpacked), positions, centre.guides,
+                                  options.trust);
+  }();
   Image denoisedScratch, noisyScratch;
   const Image& denoised = neighbour.denoised.floats(denoisedScratch);
-  Image moved = motion::resample(
-      plan, withHistory ? stacked(denoised, neighbour.history.toImage()) : denoised);
+  Image moved;
   if (withHistory) {
-    out.history = channelsOf(moved, 3, 3);
+    // Resampled together: the same taps, cubic where neither overshoots.
+    Image historyScratch;
+    std::vector<Image> both =
+        motion::resample(plan, {&denoised, &neighbour.history.floats(historyScratch)});
+    moved = std::move(both[0]);
+    out.history = std::move(both[1]);
     out.historyWeight = std::move(still);
-    moved = channelsOf(moved, 0, 3);
+  } else {
+    moved = motion::resample(plan, denoised);
   }
   const Image& trust = plan.trust;
   const Image neighbourNoisy = tonemapped(neighbour.noisy.floats(noisyScratch), centre.scale);
@@ -789,7 +802,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     for (std::size_t k = 0; k < along.size(); ++k)
       neighbours[first + k].positions = std::move(along[k]);
   });
-  const Centre c = centreOf(current);
+  Centre c(current);
   std::vector<Contribution> contributions(neighbours.size());
   forEach(neighbours.size(), options.threads, [&](std::size_t n) {
     Neighbour& nb = neighbours[n];
@@ -806,16 +819,19 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
           trustFeatures(c, contributions[n], meanMapped, int(distance), neighbours[n].forward);
     });
   }
-  const Image referenceMapped = tonemapped(
-      colourReference(c.denoised, contributions, options.colourReference, options.threads),
-      c.scale);
-  const Image viewDependent = current.viewDependent.toImage();
-  forEach(contributions.size(), options.threads, [&](std::size_t n) {
-    applyColourTest(contributions[n], referenceMapped, c, options);
-    if (options.learnedTrust && !features[n].empty())
-      applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
-    applyViewDependence(contributions[n], viewDependent, options.viewDependentMotion);
-  });
+  {
+    const Image referenceMapped = tonemapped(
+        colourReference(c.denoised, contributions, options.colourReference, options.threads),
+        c.scale);
+    const Image viewDependent = current.viewDependent.toImage();
+    forEach(contributions.size(), options.threads, [&](std::size_t n) {
+      applyColourTest(contributions[n], referenceMapped, c, options);
+      if (options.learnedTrust && !features[n].empty())
+        applyLearnedTrust(contributions[n], features[n], *options.learnedTrust);
+      applyViewDependence(contributions[n], viewDependent, options.viewDependentMotion);
+    });
+  }
+  c.dropTestImages();
   if (options.observeTrust) {
     TrustSamples samples{c.denoised, c.scale, {}, {}, {}, {}};
     for (std::size_t n = 0; n < contributions.size(); ++n) {
@@ -830,18 +846,24 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
   forEach(contributions.size(), options.threads,
           [&](std::size_t n) { applyDrift(contributions[n], c.denoised, options); });
 
-  const WeightedMean mean = weightedMean(c.denoised, contributions, options.threads);
   TemporalResult result;
-  result.color = toImage(mean.value, c.denoised);
+  {
+    const WeightedMean mean = weightedMean(c.denoised, contributions, options.threads);
+    result.color = toImage(mean.value, c.denoised);
+    double share = 0.0;
+    for (double w : mean.weight) share += 1.0 - 1.0 / w;
+    result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());
+  }
   result.stats.neighbours = static_cast<int>(neighbours.size());
-  for (const Contribution& k : contributions) {
+  for (Contribution& k : contributions) {
     result.stats.repeatedNoise += k.verdict == Contribution::Verdict::RepeatedNoise;
     result.stats.changedLight += k.verdict == Contribution::Verdict::ChangedLight;
     result.stats.relit += k.verdict == Contribution::Verdict::Relit;
     result.stats.drifted += !k.drifted.empty();
     const auto used =
         std::count_if(k.weight.begin(), k.weight.end(), [](double w) { return w > 0.0; });
-    result.stats.trusted.push_back(double(used) / mean.weight.size());
+    result.stats.trusted.push_back(double(used) / c.denoised.pixelCount());
+    k.image = Image();  // in the mean: only its weights, taps and light factor are needed on
   }
   if (options.accumulatedShare > 0.0) {
     std::vector<const WindowFrame*> frames;
@@ -849,9 +871,6 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     accumulateNoisy(current, frames, contributions, options.threads, result);
     result.pastHistories = pastHistoriesOf(contributions, c);
   }
-  double share = 0.0;
-  for (double w : mean.weight) share += 1.0 - 1.0 / w;
-  result.stats.historyShare = share / std::max<std::size_t>(1, mean.weight.size());
   std::vector<std::size_t> indices;
   for (const Neighbour& nb : neighbours) indices.push_back(nb.index);
   result.weights = weightsOf(std::move(contributions), indices, centre, options);

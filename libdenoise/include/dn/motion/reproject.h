@@ -17,6 +17,17 @@ struct Guides {
   Image depth;   // 1 channel, camera distance
 };
 
+// The same by reference, for callers that hold the images otherwise; null
+// or empty: that test is skipped.
+struct GuideImages {
+  const Image* albedo = nullptr;
+  const Image* normal = nullptr;
+  const Image* depth = nullptr;
+  GuideImages() = default;
+  GuideImages(const Image* a, const Image* n, const Image* d) : albedo(a), normal(n), depth(d) {}
+  GuideImages(const Guides& g) : albedo(&g.albedo), normal(&g.normal), depth(&g.depth) {}
+};
+
 // The rejection thresholds (docs/dndenoise.md, "Temporal denoising").
 struct TrustOptions {
   double depthRelative = 0.05;   // |z' - z| / z beyond this: another surface
@@ -79,10 +90,13 @@ struct Resampling {
   Image trust;  // reproject's
   bool empty() const { return taps.empty(); }
 };
-Resampling planResampling(const Guides& sourceGuides, const Image& positions,
-                          const Guides& currentGuides, const TrustOptions& options = {});
+Resampling planResampling(const GuideImages& sourceGuides, const Image& positions,
+                          const GuideImages& currentGuides, const TrustOptions& options = {});
 // `source` (any channel count) brought in by `plan`; zeros where trust is 0.
 Image resample(const Resampling& plan, const Image& source);
+// Several images brought in together, as one image of their channels
+// stacked would be: Catmull-Rom only where no channel of any overshoots below 0.
+std::vector<Image> resample(const Resampling& plan, const std::vector<const Image*>& sources);
 
 // Nearest-pixel resampling (no filtering: noise stays uncorrelated), for the
 // repeated-noise test. Zeros where positions are NaN.

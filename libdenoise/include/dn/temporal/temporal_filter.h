@@ -33,6 +33,11 @@ struct WindowGuides {
         normal(std::move(guides.normal)),
         depth(std::move(guides.depth)) {}
   motion::Guides toGuides() const { return {albedo.toImage(), normal.toImage(), depth.toImage()}; }
+  // The guides where held in floats, those packed unpacked into `scratch`.
+  motion::GuideImages view(motion::Guides& scratch) const {
+    return {&albedo.floats(scratch.albedo), &normal.floats(scratch.normal),
+            &depth.floats(scratch.depth)};
+  }
 };
 
 // A frame's motion as the window holds it.
