@@ -32,7 +32,6 @@ struct WindowGuides {
       : albedo(std::move(guides.albedo)),
         normal(std::move(guides.normal)),
         depth(std::move(guides.depth)) {}
-  motion::Guides toGuides() const { return {albedo.toImage(), normal.toImage(), depth.toImage()}; }
   // The guides where held in floats, those packed unpacked into `scratch`.
   motion::GuideImages view(motion::Guides& scratch) const {
     return {&albedo.floats(scratch.albedo), &normal.floats(scratch.normal),
