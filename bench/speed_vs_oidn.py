@@ -129,8 +129,11 @@ def main():
             subprocess.run(["oiiotool", EXAMPLE, "--resize", args.size, "-o", frame], check=True)
         else:
             tiled_frame(frame, w, h)
-    print(f"{frame}; {args.threads} threads; {args.rounds} rounds, each command once per round, in turn; "
-          f"model {args.model}")
+    # Paths as the repository names them, so that a log names no folder of one machine.
+    shown = frame if args.frame else os.path.basename(frame)
+    model = os.path.relpath(os.path.realpath(args.model), ROOT)
+    print(f"{shown}; {args.threads} threads; {args.rounds} rounds, each command once per round, in turn; "
+          f"model {model}")
     results = {name: [] for name in commands}
     for r in range(args.rounds):
         for name, (env, cmd) in commands.items():

@@ -28,6 +28,7 @@ import argparse
 import datetime
 import os
 import platform
+import re
 import shlex
 import subprocess
 import sys
@@ -230,6 +231,13 @@ def page(args, command):
     return "\n".join(lines) + "\n"
 
 
+def machine_neutral(text):
+    """The page without this machine's folders: the repository's own paths
+    relative to it, a benchmark's temporary frame by its name."""
+    text = re.sub(r"/tmp/tmp\w+/", "", text)
+    return re.sub(re.escape(ROOT) + r"/(?:bench/\.\./)?", "", text)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--evaldata", default="/work/evaldata")
@@ -260,7 +268,7 @@ def main():
         text = page(args, command)
     tmp = f"{args.results}.tmp{os.getpid()}"
     with open(tmp, "w") as f:
-        f.write(text)
+        f.write(machine_neutral(text))
     os.replace(tmp, args.results)
     print(f"results: wrote {args.results}")
 
