@@ -141,8 +141,8 @@ int run(Options o, int argc, char** argv) {
     }
     if (progress) progress->finish();
     if (o.verbose && sequence) fmt::print(stderr, "dndenoise: {}: {}\n", name, sequence->report());
-    if (sequence && !sequence->missingMotion().empty())
-      fmt::print(stderr, "dndenoise: {}: {}\n", name, sequence->missingMotion());
+    if (sequence && !sequence->aloneBecause().empty())
+      fmt::print(stderr, "dndenoise: {}: {}\n", name, sequence->aloneBecause());
     reportResult(o, denoiser, name, input, frame, result, std::move(times));
 
     // Nothing non-finite leaves the tool: overflow becomes the largest float.

@@ -7,7 +7,8 @@ and over how many frames the render was accumulated, a frame's result does
 not depend on how the shot was split into runs (bit-identical pixels), and a
 sequence without motion vectors is denoised frame by frame with one line
 saying so, as is a single frame of a sequence without its Vector pass (its
-neighbours' chains stop at it). The filter as tensor operations
+neighbours' chains stop at it), or a frame of another size than its
+neighbours. The filter as tensor operations
 (--temporal-filter tensors, on the CPU device) gives the CPU code's frames
 within 1e-4 of the peak. Also dnmetrics on the sequences (per-frame rows, flicker).
 
@@ -48,6 +49,16 @@ def without_vectors(source, target):
     frame = OpenEXR.File(source, separate_channels=True)
     kept = {name: c for name, c in frame.channels().items() if ".Vector." not in name}
     OpenEXR.File(frame.header(), kept).write(target)
+
+
+def cropped(source, target, width, height):
+    """The frame's top-left width x height pixels, every channel kept."""
+    frame = OpenEXR.File(source, separate_channels=True)
+    header = frame.header()
+    corner = np.array([width - 1, height - 1], dtype=np.int32)
+    header["dataWindow"] = header["displayWindow"] = (np.zeros(2, dtype=np.int32), corner)
+    kept = {name: c.pixels[:height, :width].copy() for name, c in frame.channels().items()}
+    OpenEXR.File(header, kept).write(target)
 
 
 def main():
@@ -159,6 +170,25 @@ def main():
     history = [l for l in result.stderr.splitlines() if "from history" in l]
     check("(0 neighbours" in history[2] and "(1 neighbour" in history[1] and "(2 neighbours" in history[3],
           "its neighbours' chains stop at it (frame 2: frame 1 alone; frame 4: frames 5 and 6)")
+
+    # One frame of another size: denoised alone, one line saying why; the
+    # neighbours' chains stop at it, as at a frame without vectors.
+    odd = os.path.join(work, "odd")
+    os.makedirs(odd)
+    for n in FRAMES:
+        source = os.path.join(args.testdata, "sequence", f"spp4.{n:04d}.exr")
+        target = os.path.join(odd, f"spp4.{n:04d}.exr")
+        cropped(source, target, 24, 18) if n == 3 else shutil.copy(source, target)
+    result = run([args.dndenoise, os.path.join(odd, "spp4.#.exr"), "-o", os.path.join(work, "odd_out.#.exr"),
+                  "--rgb-only", "--window", "2", "-v"] + fast)
+    notes = [l for l in result.stderr.splitlines() if "denoised alone" in l]
+    check(len(notes) == 1 and "spp4.0003.exr" in notes[0] and "this frame is 24x18, its neighbours 48x36"
+          in notes[0] and "chains stop at it" in notes[0], "a frame of another size: one line saying why it is alone")
+    history = [l for l in result.stderr.splitlines() if "from history" in l]
+    check("(0 neighbours" in history[2] and "(1 neighbour" in history[1] and "(2 neighbours" in history[3],
+          "its neighbours' chains stop at it too")
+    check(read_rgb(os.path.join(work, "odd_out.0003.exr")).shape[:2] == (18, 24),
+          "the odd frame's output has its own size")
 
     for bad in (["--window", "0"], ["--temporal", "maybe"], ["--window", "9"],
                 ["--temporal-trust", "maybe"]):

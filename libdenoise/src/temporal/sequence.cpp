@@ -307,6 +307,12 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
           past->second->enterPast(settings_.filterDevice);
     auto source = estimate(m, nullptr, read, denoise) ? input(m, nullptr, read) : nullptr;
     const bool usable = source && source->frame.denoised.sameShape(own);
+    if (source && m != number) {
+      ++out.present;
+      if (!usable && out.otherSize++ == 0)
+        out.otherSizeName = std::to_string(source->frame.denoised.width()) + "x" +
+                            std::to_string(source->frame.denoised.height());
+    }
     window.push_back(usable ? &source->frame : nullptr);
     if (settings_.filterDevice) deviceWindow.push_back(usable ? &onDevice(*source) : nullptr);
   }
@@ -446,7 +452,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
     if (number < n) past->dropOwnUse();
   Filtered self = filtered(n, &frame, read, denoise);
   lastStats_ = self.result.stats;
-  lastWithoutMotion_ = inputs_.at(n)->frame.motion.empty();
+  lastAloneBecause_ = aloneBecause(*inputs_.at(n), self);
   WithCompanions out{*self.alone, {}};
   // The companions first, so that the neighbours' taps and weights are gone
   // before the networks run again (about 21 bytes a pixel a neighbour).
@@ -517,10 +523,19 @@ std::string Sequence::report() const {
   return out;
 }
 
-std::string Sequence::missingMotion() const {
-  return lastWithoutMotion_ ? "no motion vectors in this frame (Blender: the Vector pass, motion "
-                              "blur off): denoised alone, and its neighbours' chains stop at it"
-                            : std::string();
+std::string Sequence::aloneBecause() const { return lastAloneBecause_; }
+
+std::string Sequence::aloneBecause(const Input& input, const Filtered& filtered) {
+  if (input.frame.motion.empty())
+    return "no motion vectors in this frame (Blender: the Vector pass, motion blur off): "
+           "denoised alone, and its neighbours' chains stop at it";
+  if (filtered.present > 0 && filtered.otherSize == filtered.present) {
+    const WindowImage& own = input.frame.denoised;
+    return "this frame is " + std::to_string(own.width()) + "x" + std::to_string(own.height()) +
+           ", its neighbours " + filtered.otherSizeName +
+           ": denoised alone, and their chains stop at it";
+  }
+  return std::string();
 }
 
 }  // namespace dn::temporal

@@ -129,9 +129,10 @@ class Sequence {
   int lastFrame() const { return lastNumber_; }
   // The same in one line: "frame N: 40% from history (4 neighbours...)".
   std::string report() const;
-  // Why the last frame had no neighbours, in one line, where it had no motion
-  // vectors (denoised alone, and its neighbours' chains stop at it); else empty.
-  std::string missingMotion() const;
+  // Why the last frame was denoised alone, in one line, where its file is the
+  // reason: it has no motion vectors, or its size is not its neighbours'
+  // (their chains then stop at it too); else empty.
+  std::string aloneBecause() const;
 
  private:
   struct Input;
@@ -152,6 +153,10 @@ class Sequence {
     // network) are on the host; the rest is in `device`.
     TemporalResult result;
     std::optional<DeviceTemporalResult> device;
+    // The window's frames left out for being of another size than the frame:
+    // how many, of how many present, and the first one's size.
+    int otherSize = 0, present = 0;
+    std::string otherSizeName;  // "WxH"
   };
   Filtered filtered(int number, const FrameBuffers* given, const Read& read,
                     const Denoise& denoise);
@@ -187,6 +192,8 @@ class Sequence {
   Image blendOnDevice(int number, const DeviceTemporalResult& filtered, double share) const;
   std::string fileOf(int number) const;
   void forget(int number);
+  // aloneBecause() of the frame held as `input`, filtered as `filtered`.
+  static std::string aloneBecause(const Input& input, const Filtered& filtered);
 
   std::string pattern_;
   std::map<std::string, int> numbers_;  // input file -> frame number
@@ -195,7 +202,7 @@ class Sequence {
   std::map<int, std::shared_ptr<const DenoiseResult>> estimates_;
   TemporalStats lastStats_;
   int lastNumber_ = 0;
-  bool lastWithoutMotion_ = false;
+  std::string lastAloneBecause_;
 };
 
 }  // namespace dn::temporal
