@@ -177,6 +177,21 @@ TEST_CASE("other renderers' motion names are found and decoded") {
   CHECK(bf.toNext.pixels == std::vector<float>{2.0f, 1.0f});
 }
 
+TEST_CASE("motion with NaN or Inf is refused with the file's name, in either group") {
+  const auto prman =
+      findMotionChannels({"Ci.r", "motionBack.r", "motionBack.g", "motionFore.r", "motionFore.g"});
+  REQUIRE(prman);
+  Image back(2, 1, 2), fore(2, 1, 2);
+  back.pixels = {-1.0f, 0.5f, 0.0f, 0.0f};
+  fore.pixels = {2.0f, -1.0f, 0.0f, 0.0f};
+  CHECK_NOTHROW(decodeMotion(*prman, {back, fore}, 2, 1, "shot.0001.exr"));
+  fore.pixels[3] = std::numeric_limits<float>::quiet_NaN();
+  CHECK_THROWS_WITH_AS(decodeMotion(*prman, {back, fore}, 2, 1, "shot.0001.exr"),
+                       "shot.0001.exr: the motion holds NaN or Inf values", IoError);
+  fore.pixels[3] = 0.0f, back.pixels[0] = std::numeric_limits<float>::infinity();
+  CHECK_THROWS_AS(decodeMotion(*prman, {back, fore}, 2, 1, "shot.0001.exr"), IoError);
+}
+
 TEST_CASE("a separate motion file of another size is refused with the file's name") {
   const std::string middle = kMotionDir + "blender34/spp4.0002.exr";
   CHECK_THROWS_WITH_AS(readMotion(middle, 32, 32), doctest::Contains("spp4.0002.exr"), IoError);

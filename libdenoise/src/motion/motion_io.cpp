@@ -123,13 +123,15 @@ std::optional<MotionChannels> unnamedChannels(const std::vector<std::string>& na
 
 MotionField decodeMotion(const MotionChannels& found, const std::vector<Image>& read, int width,
                          int height, const std::string& path) {
+  for (const Image& group : read) {  // RenderMan's motionFore too
+    if (group.width != width || group.height != height)
+      throw IoError(path + ": the motion is " + std::to_string(group.width) + "x" +
+                    std::to_string(group.height) + " but the frame is " + std::to_string(width) +
+                    "x" + std::to_string(height));
+    for (float v : group.pixels)
+      if (!std::isfinite(v)) throw IoError(path + ": the motion holds NaN or Inf values");
+  }
   const Image& first = read.front();
-  if (first.width != width || first.height != height)
-    throw IoError(path + ": the motion is " + std::to_string(first.width) + "x" +
-                  std::to_string(first.height) + " but the frame is " + std::to_string(width) +
-                  "x" + std::to_string(height));
-  for (float v : first.pixels)
-    if (!std::isfinite(v)) throw IoError(path + ": the motion holds NaN or Inf values");
   MotionField field;
   switch (found.convention) {
     case Convention::BlenderVector:
