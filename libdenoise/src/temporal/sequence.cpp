@@ -125,6 +125,11 @@ FrameBuffers withHistory(const FrameBuffers& frame, Image history, const WindowI
   return out;
 }
 
+// "WxH".
+std::string sizeText(const WindowImage& image) {
+  return std::to_string(image.width()) + "x" + std::to_string(image.height());
+}
+
 // FrameBuffers::extra's names of the motion channels' groups (MotionChannels::groups).
 const char* const kMotionGroups[] = {"motion", "motion (second group)"};
 
@@ -309,9 +314,7 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
     const bool usable = source && source->frame.denoised.sameShape(own);
     if (source && m != number) {
       ++out.present;
-      if (!usable && out.otherSize++ == 0)
-        out.otherSizeName = std::to_string(source->frame.denoised.width()) + "x" +
-                            std::to_string(source->frame.denoised.height());
+      if (!usable && out.otherSize++ == 0) out.otherSizeName = sizeText(source->frame.denoised);
     }
     window.push_back(usable ? &source->frame : nullptr);
     if (settings_.filterDevice) deviceWindow.push_back(usable ? &onDevice(*source) : nullptr);
@@ -530,10 +533,8 @@ std::string Sequence::aloneBecause(const Input& input, const Filtered& filtered)
     return "no motion vectors in this frame (Blender: the Vector pass, motion blur off): "
            "denoised alone, and its neighbours' chains stop at it";
   if (filtered.present > 0 && filtered.otherSize == filtered.present) {
-    const WindowImage& own = input.frame.denoised;
-    return "this frame is " + std::to_string(own.width()) + "x" + std::to_string(own.height()) +
-           ", its neighbours " + filtered.otherSizeName +
-           ": denoised alone, and their chains stop at it";
+    return "this frame is " + sizeText(input.frame.denoised) + ", its neighbours " +
+           filtered.otherSizeName + ": denoised alone, and their chains stop at it";
   }
   return std::string();
 }
