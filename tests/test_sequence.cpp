@@ -3,6 +3,8 @@
 // from, is the frame as read, and each file is decoded once over a whole shot.
 #include "doctest_torch.h"
 
+#include <algorithm>
+#include <cmath>
 #include <map>
 
 #include "dn/io/buffer_io.h"
@@ -42,9 +44,9 @@ struct CountedShot {
   CountedShot() {
     for (int n = 1; n <= 6; ++n) files.push_back(frameFile(kShot, n));
   }
-  std::unique_ptr<Sequence> plan() const {
+  std::unique_ptr<Sequence> plan(const temporal::SequenceSettings& settings = {}) const {
     std::string why;
-    return Sequence::plan(kShot, files, {}, why);
+    return Sequence::plan(kShot, files, settings, why);
   }
 };
 
@@ -52,6 +54,28 @@ struct CountedShot {
 DenoiseResult asRendered(const std::string&, const FrameBuffers& frame) {
   DenoiseResult result;
   result.color = frame.get("color");
+  return result;
+}
+
+// A deterministic stand-in for a denoiser: the 5x5 box mean.
+Image blurred(const Image& image) {
+  Image out(image.width, image.height, image.channels);
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x)
+      for (int c = 0; c < image.channels; ++c) {
+        double sum = 0.0;
+        int count = 0;
+        for (int v = std::max(0, y - 2); v <= std::min(image.height - 1, y + 2); ++v)
+          for (int u = std::max(0, x - 2); u <= std::min(image.width - 1, x + 2); ++u)
+            sum += image.at(u, v, c), ++count;
+        out.at(x, y, c) = static_cast<float>(sum / count);
+      }
+  return out;
+}
+
+DenoiseResult asBlurred(const std::string&, const FrameBuffers& frame) {
+  DenoiseResult result;
+  result.color = blurred(frame.get("color"));
   return result;
 }
 
@@ -96,4 +120,42 @@ TEST_CASE("a neighbour's companions are made from the frame as read, each file d
   }
   CHECK(made == 6);
   for (const auto& file : counted.files) CHECK(counted.decoded[file] == 1);
+}
+
+TEST_CASE("a companion made as the colour is filtered, accumulated and averaged over time as it") {
+  // A companion of the colour's images, denoised (here: blurred) as the
+  // colour is, alone and accumulated, takes the colour's weights at every
+  // step, its past histories' mean included, so it comes out as the colour.
+  // (A neighbour brought to the frame's light first brings each image by its
+  // own factor, and the colour's history by its result's: none is here.)
+  temporal::SequenceSettings settings;
+  settings.filter.changedLightSpread = settings.filter.changedLightMean = 1e9;
+  settings.filter.driftThreshold = 0.0;
+  CountedShot counted;
+  auto shot = counted.plan(settings);
+  REQUIRE(shot);
+  temporal::CompanionMaker maker;
+  maker.make = [](const std::string&, const FrameBuffers& frame) {
+    temporal::Companions companions;
+    companions["colour"].image = blurred(frame.get("color"));
+    companions["colour"].render = frame.get("color");
+    return companions;
+  };
+  maker.denoiseAccumulated = [](const FrameBuffers&, const std::map<std::string, Image>& renders) {
+    std::map<std::string, Image> out;
+    for (const auto& [name, render] : renders) out[name] = blurred(render);
+    return out;
+  };
+  int averaged = 0;
+  for (const auto& file : counted.files) {
+    CAPTURE(file);
+    const FrameBuffers frame = shot->frame(file, counted.read);
+    const auto out = shot->denoise(file, frame, counted.read, asBlurred, maker);
+    const Image& colour = out.result.color;
+    const Image& companion = out.companions.at("colour");
+    REQUIRE(companion.sameShape(colour));
+    CHECK(companion.pixels == colour.pixels);
+    averaged += shot->lastStats().accumulatedFrames > 1.0;
+  }
+  CHECK(averaged >= 4);
 }

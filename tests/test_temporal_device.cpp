@@ -386,6 +386,21 @@ TEST_CASE("device filter: past histories, their mean and the blend agree") {
   CHECK_THROWS_AS(blendWithHistory(b.device.color, mean.slice(1, 0, 4), 0.35),
                   std::invalid_argument);
 
+  // The mean's weights for another image's histories (a light pass's), on the
+  // host from either path; with them filterWith gives the colour's mean.
+  const FilterWeights onCpu = historyWeights(own, b.cpu, b.cpu.weights);
+  const FilterWeights fromDevice = historyWeights(ownOnDevice, b.device, b.cpu.weights);
+  REQUIRE(onCpu.neighbours.size() == 2);
+  REQUIRE(fromDevice.neighbours.size() == 2);
+  for (std::size_t k = 0; k < 2; ++k) {
+    CHECK(onCpu.neighbours[k].frame == b.cpu.pastHistories.frames[k]);
+    CHECK(fromDevice.neighbours[k].frame == onCpu.neighbours[k].frame);
+    CHECK(maxDifference(fromDevice.neighbours[k].weight, onCpu.neighbours[k].weight) < 1e-5);
+  }
+  const std::vector<const Image*> histories = {&frames[0].history.floats(),
+                                               &frames[1].history.floats(), &own};
+  checkAgrees("history mean by its weights", filterWith(onCpu, histories), cpuMean);
+
   // A pan: every history was resampled on its way in and none counts.
   std::vector<WindowFrame> pan = shot(3, 1.0f, 0, 0, 1300);
   for (WindowFrame& f : pan) f.history = f.denoised;

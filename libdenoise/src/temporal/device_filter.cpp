@@ -760,14 +760,16 @@ void accumulateNoisy(const Centre& centre, const std::vector<const DeviceFrame*>
 }
 
 DevicePastHistories pastHistoriesOf(const std::vector<Contribution>& contributions,
-                                    const Centre& centre) {
+                                    const std::vector<std::size_t>& indices, const Centre& centre) {
   DevicePastHistories out;
-  for (const Contribution& k : contributions) {
+  for (std::size_t n = 0; n < contributions.size(); ++n) {
+    const Contribution& k = contributions[n];
     if (!k.history.defined() || !k.used()) continue;
     const Tensor weight = k.weight * k.historyWeight;
     if (!(weight > 0).any().item<bool>()) continue;
     out.images.push_back(k.history);
     out.weights.push_back(weight);
+    out.frames.push_back(indices[n]);
   }
   if (!out.empty()) out.scale = centre.scale, out.noise = centre.noise;
   return out;
@@ -962,7 +964,9 @@ DeviceTemporalResult filterFrame(const std::vector<const DeviceFrame*>& window, 
     std::vector<const DeviceFrame*> frames;
     for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
     accumulateNoisy(c, frames, contributions, result);
-    result.pastHistories = pastHistoriesOf(contributions, c);
+    std::vector<std::size_t> indices;
+    for (const Neighbour& nb : neighbours) indices.push_back(nb.index);
+    result.pastHistories = pastHistoriesOf(contributions, indices, c);
   }
   DeviceFilterWeights& weights = result.weights;
   weights.centre = centre;
@@ -1010,16 +1014,17 @@ torch::Tensor filterWith(const DeviceFilterWeights& weights,
   return weightedMean(own, others).first;
 }
 
-torch::Tensor historyMean(const torch::Tensor& own, const DeviceTemporalResult& result,
-                          const TemporalOptions& options) {
+namespace {
+
+// Per past history, its weight in historyMean: where it differs from the
+// frame's own by less than the noise its accumulated render still had
+// (historyTrust of temporal_filter.cpp).
+std::vector<Tensor> historyTrust(const Tensor& own, const DeviceTemporalResult& result,
+                                 const TemporalOptions& options) {
   const DevicePastHistories& past = result.pastHistories;
-  if (past.empty()) return own;
-  torch::NoGradGuard noGrad;
   for (const Tensor& image : past.images)
     if (image.sizes() != own.sizes())
       throw std::invalid_argument("historyMean: the images differ in shape");
-  // Each counts where it differs from the frame's own by less than the noise
-  // its accumulated render still had (historyMean of temporal_filter.cpp).
   const Tensor ownMapped = tonemapped(own, past.scale);
   const Tensor error = past.noise * torch::sqrt(2.0f / result.historyFrames[0]);
   std::vector<Tensor> weights;
@@ -1029,6 +1034,26 @@ torch::Tensor historyMean(const torch::Tensor& own, const DeviceTemporalResult& 
         past.weights[k] *
         ((options.lightHigh - d / error) / (options.lightHigh - options.lightLow)).clamp(0.0, 1.0));
   }
+  return weights;
+}
+
+}  // namespace
+
+FilterWeights historyWeights(const torch::Tensor& own, const DeviceTemporalResult& result,
+                             const FilterWeights& taps, const TemporalOptions& options) {
+  if (result.pastHistories.empty()) return FilterWeights();
+  torch::NoGradGuard noGrad;
+  std::vector<std::vector<double>> weights;
+  for (const Tensor& w : historyTrust(own, result, options)) weights.push_back(toDoubles(w));
+  return pastWeights(taps, result.pastHistories.frames, std::move(weights));
+}
+
+torch::Tensor historyMean(const torch::Tensor& own, const DeviceTemporalResult& result,
+                          const TemporalOptions& options) {
+  const DevicePastHistories& past = result.pastHistories;
+  if (past.empty()) return own;
+  torch::NoGradGuard noGrad;
+  const std::vector<Tensor> weights = historyTrust(own, result, options);
   std::vector<Weighted> others;
   for (std::size_t k = 0; k < weights.size(); ++k) others.push_back({&past.images[k], &weights[k]});
   return weightedMean(own, others).first;
@@ -1055,6 +1080,7 @@ TemporalResult toHost(const DeviceTemporalResult& result, bool withWeights) {
     out.pastHistories.images.push_back(pixelsToImage(past.images[k], w, h));
     out.pastHistories.weights.push_back(toDoubles(past.weights[k]));
   }
+  out.pastHistories.frames = past.frames;
   if (!past.empty()) {
     out.pastHistories.scale = past.scale.item<double>();
     const Tensor noise = past.noise.contiguous().cpu();

@@ -36,6 +36,7 @@ struct Sequence::Input {
   // The prefilter's, for denoising the frame's history (rounded to half floats).
   WindowImage cleanAlbedo, cleanNormal;
   std::optional<HeldCompanions> companions;  // once made
+  bool companionHistories = false;           // their histories made (companionHistories)
   std::optional<DeviceFrame> onDevice;       // SequenceSettings::filterDevice: the frame there
   bool inPast = false;                       // enterPast() done
 
@@ -136,6 +137,17 @@ const char* const kMotionGroups[] = {"motion", "motion (second group)"};
 bool allZero(const Image* image) {
   return !image ||
          std::all_of(image->pixels.begin(), image->pixels.end(), [](float v) { return v == 0.0f; });
+}
+
+// `weights`' neighbours of window frames `frames` only.
+FilterWeights onlyFrames(FilterWeights weights, const std::vector<std::size_t>& frames) {
+  auto& n = weights.neighbours;
+  n.erase(std::remove_if(n.begin(), n.end(),
+                         [&](const NeighbourWeights& nb) {
+                           return std::find(frames.begin(), frames.end(), nb.frame) == frames.end();
+                         }),
+          n.end());
+  return weights;
 }
 
 template <class Map>
@@ -364,15 +376,28 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalR
   return history;
 }
 
-void Sequence::makePastHistories(int number, const Read& read, const Denoise& denoise) {
+void Sequence::makePastHistories(int number, const Read& read, const Denoise& denoise,
+                                 const CompanionMaker& companions) {
+  const bool again = companions.make && companions.denoiseAccumulated;
   for (int m = number - settings_.radius; m < number; ++m) {
     auto past = input(m, nullptr, read);
-    if (!past || !past->frame.history.empty()) continue;
+    if (!past) continue;
+    const bool colour = past->frame.history.empty();
+    if (!colour && !(again && !past->companionHistories)) continue;
     forget(m);  // its window only, so memory stays bounded at a run's start too
     Filtered earlier = filtered(m, nullptr, read, denoise);
     if (!earlier.alone) continue;
-    earlier.result.weights = FilterWeights();  // only the passes of the frames asked for use them
-    denoisedHistory(m, past->readAgain(), earlier.result, denoise);
+    const FrameBuffers frame = past->readAgain();
+    if (again) {
+      const FilterWeights weights =
+          earlier.device ? earlier.device->weights.toHost() : std::move(earlier.result.weights);
+      companionHistories(m, frame,
+                         filteredCompanions(m, frame, weights, companions,
+                                            earlier.result.stats.accumulatedFrames > 1.0),
+                         companions);
+    }
+    earlier.result.weights = FilterWeights();
+    if (colour) denoisedHistory(m, frame, earlier.result, denoise);
   }
 }
 
@@ -436,6 +461,45 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Fram
   return out;
 }
 
+std::map<std::string, Image> Sequence::companionHistories(int number, const FrameBuffers& frame,
+                                                          const FilteredCompanions& passes,
+                                                          const CompanionMaker& make) {
+  Input& input = *inputs_.at(number);
+  std::map<std::string, Image> again;
+  if (!passes.accumulated.empty()) {
+    const FrameBuffers guides =
+        withHistory(frame, frame.get("color"), input.cleanAlbedo, input.cleanNormal);
+    again = make.denoiseAccumulated(guides, passes.accumulated);
+  }
+  // Where nothing was accumulated the history is the companion itself, as
+  // the colour's is its result.
+  for (auto& [name, held] : *input.companions) {
+    if (held.render.empty()) continue;
+    auto it = again.find(name);
+    held.history = it != again.end() ? WindowImage(it->second) : held.image;
+    held.history.pack();
+  }
+  input.companionHistories = true;
+  return again;
+}
+
+Image Sequence::companionHistoryMean(int number, const std::string& name, const Image& own,
+                                     const FilterWeights& weights) const {
+  if (weights.empty()) return own;
+  const int first = number - static_cast<int>(weights.centre);
+  std::vector<const Image*> histories(weights.centre + 1, nullptr);
+  std::vector<Image> unpacked(histories.size());
+  histories[weights.centre] = &own;
+  for (const NeighbourWeights& nb : weights.neighbours) {
+    const auto& companions = inputs_.at(first + static_cast<int>(nb.frame))->companions;
+    if (!companions || !companions->count(name)) continue;
+    const WindowImage& history = companions->at(name).history;
+    if (!history.empty()) histories[nb.frame] = &history.floats(unpacked[nb.frame]);
+  }
+  const bool viewDependent = inputs_.at(number)->companions->at(name).viewDependent;
+  return filterWith(weights, histories, viewDependent ? settings_.filter.viewDependentMotion : 0.0);
+}
+
 DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
                                 const Read& read, const Denoise& denoise) {
   return this->denoise(file, frame, read, denoise, CompanionMaker()).result;
@@ -450,7 +514,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   const double share = settings_.filter.accumulatedShare;
   // The past frames' histories: made by the calls before, or here for the
   // first frames of a run (a shot split into runs gives the same bits).
-  if (share > 0.0) makePastHistories(n, read, denoise);
+  if (share > 0.0) makePastHistories(n, read, denoise, companions);
   for (auto& [number, past] : inputs_)
     if (number < n) past->dropOwnUse();
   Filtered self = filtered(n, &frame, read, denoise);
@@ -458,17 +522,29 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   lastAloneBecause_ = aloneBecause(*inputs_.at(n), self);
   WithCompanions out{*self.alone, {}};
   // The companions first, so that the neighbours' taps and weights are gone
-  // before the networks run again (about 21 bytes a pixel a neighbour).
+  // before the networks run again (about 21 bytes a pixel a neighbour), but
+  // for the past ones with a history where the companions are denoised again.
   FilteredCompanions passes;
-  if (companions.make)
-    passes = filteredCompanions(
-        n, frame, self.device ? self.device->weights.toHost() : self.result.weights, companions,
-        share > 0.0 && companions.denoiseAccumulated && self.result.stats.accumulatedFrames > 1.0);
+  FilterWeights pastTaps;
+  const bool again = share > 0.0 && companions.make && companions.denoiseAccumulated;
+  if (companions.make) {
+    FilterWeights weights =
+        self.device ? self.device->weights.toHost() : std::move(self.result.weights);
+    passes = filteredCompanions(n, frame, weights, companions,
+                                again && self.result.stats.accumulatedFrames > 1.0);
+    if (again)
+      pastTaps = onlyFrames(std::move(weights), self.device ? self.device->pastHistories.frames
+                                                            : self.result.pastHistories.frames);
+  }
   self.result.weights = FilterWeights();
   DenoiseResult& result = out.result;
+  FilterWeights pastHistories;  // the colour's history weights, for the companions'
   if (self.device) {
     self.device->weights = DeviceFilterWeights();
     if (share > 0.0) denoisedHistory(n, frame, self.result, denoise);
+    if (again)
+      pastHistories = historyWeights(inputs_.at(n)->onDevice->history, *self.device, pastTaps,
+                                     settings_.filter);
     result.color = blendOnDevice(n, *self.device, share);
   } else {
     result.color = std::move(self.result.color);
@@ -476,15 +552,14 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
       const Image own = denoisedHistory(n, frame, self.result, denoise);
       result.color =
           blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
+      if (again) pastHistories = historyWeights(own, self.result, pastTaps, settings_.filter);
     }
   }
-  if (!passes.accumulated.empty()) {
-    const Input& input = *inputs_.at(n);
-    const FrameBuffers guides =
-        withHistory(frame, frame.get("color"), input.cleanAlbedo, input.cleanNormal);
-    for (auto& [name, again] : companions.denoiseAccumulated(guides, passes.accumulated))
-      passes.filtered.at(name) = blendWithHistory(passes.filtered.at(name), again, share);
-  }
+  pastTaps = FilterWeights();
+  if (again)
+    for (const auto& [name, own] : companionHistories(n, frame, passes, companions))
+      passes.filtered.at(name) = blendWithHistory(
+          passes.filtered.at(name), companionHistoryMean(n, name, own, pastHistories), share);
   out.companions = std::move(passes.filtered);
   return out;
 }

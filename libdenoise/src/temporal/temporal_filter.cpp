@@ -726,15 +726,18 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
 
 // The past neighbours' denoised histories, weighted as their results were
 // where the surface stood still.
-PastHistories pastHistoriesOf(std::vector<Contribution>& contributions, const Centre& centre) {
+PastHistories pastHistoriesOf(std::vector<Contribution>& contributions,
+                              const std::vector<std::size_t>& indices, const Centre& centre) {
   PastHistories out;
-  for (Contribution& k : contributions) {
+  for (std::size_t n = 0; n < contributions.size(); ++n) {
+    Contribution& k = contributions[n];
     if (k.history.empty() || k.weight.empty()) continue;
     std::vector<double> weight = k.weight;
     for (std::size_t i = 0; i < weight.size(); ++i) weight[i] *= k.historyWeight.pixels[i];
     if (std::none_of(weight.begin(), weight.end(), [](double w) { return w > 0.0; })) continue;
     out.images.push_back(std::move(k.history));
     out.weights.push_back(std::move(weight));
+    out.frames.push_back(indices[n]);
   }
   if (!out.empty()) out.scale = centre.scale, out.noise = centre.noise;
   return out;
@@ -865,14 +868,14 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     result.stats.trusted.push_back(double(used) / c.denoised.pixelCount());
     k.image = Image();  // in the mean: only its weights, taps and light factor are needed on
   }
+  std::vector<std::size_t> indices;
+  for (const Neighbour& nb : neighbours) indices.push_back(nb.index);
   if (options.accumulatedShare > 0.0) {
     std::vector<const WindowFrame*> frames;
     for (const Neighbour& nb : neighbours) frames.push_back(nb.frame);
     accumulateNoisy(current, frames, contributions, options.threads, result);
-    result.pastHistories = pastHistoriesOf(contributions, c);
+    result.pastHistories = pastHistoriesOf(contributions, indices, c);
   }
-  std::vector<std::size_t> indices;
-  for (const Neighbour& nb : neighbours) indices.push_back(nb.index);
   result.weights = weightsOf(std::move(contributions), indices, centre, options);
   return result;
 }
@@ -947,29 +950,59 @@ Image accumulateWith(const FilterWeights& weights, const std::vector<const Image
   return combineOver("accumulateWith", weights, renders, results, stillPixels, true);
 }
 
-Image historyMean(const Image& own, const TemporalResult& result, const TemporalOptions& options) {
+namespace {
+
+// Per past history, its weight in historyMean. A history is far cleaner than
+// the renders filterFrame's tests judged it by: a light that moved since shows
+// in it where they saw only noise. It counts where it differs from the
+// frame's own by less than the noise its accumulated render still had: fully
+// up to lightLow such standard errors, not at all from lightHigh.
+std::vector<std::vector<double>> historyTrust(const Image& own, const TemporalResult& result,
+                                              const TemporalOptions& options) {
   const PastHistories& past = result.pastHistories;
-  if (past.empty()) return own;
   for (const Image& image : past.images)
     if (!own.sameShape(image))
       throw std::invalid_argument("historyMean: the images differ in shape");
-  // A history is far cleaner than the renders filterFrame's tests judged it
-  // by: a light that moved since shows in it where they saw only noise. It
-  // counts where it differs from the frame's own by less than the noise its
-  // accumulated render still had: fully up to lightLow such standard errors,
-  // not at all from lightHigh.
-  std::vector<Contribution> histories(past.images.size());
+  std::vector<std::vector<double>> weights = past.weights;
   const Image ownMapped = tonemapped(own, past.scale);
-  for (std::size_t k = 0; k < histories.size(); ++k) {
-    histories[k].image = past.images[k], histories[k].weight = past.weights[k];
+  for (std::size_t k = 0; k < weights.size(); ++k) {
     const std::vector<float> d =
-        absoluteDifference(tonemapped(histories[k].image, past.scale), ownMapped);
+        absoluteDifference(tonemapped(past.images[k], past.scale), ownMapped);
     for (std::size_t i = 0; i < d.size(); ++i) {
       const double error = past.noise[i] * std::sqrt(2.0 / result.historyFrames.pixels[i]);
-      histories[k].weight[i] *= std::clamp(
+      weights[k][i] *= std::clamp(
           (options.lightHigh - d[i] / error) / (options.lightHigh - options.lightLow), 0.0, 1.0);
     }
   }
+  return weights;
+}
+
+}  // namespace
+
+FilterWeights pastWeights(const FilterWeights& taps, const std::vector<std::size_t>& frames,
+                          std::vector<std::vector<double>> weights) {
+  FilterWeights out{taps.centre, taps.relightBox, taps.relightRange, taps.driftBox, {}};
+  for (std::size_t k = 0; k < frames.size(); ++k)
+    for (const NeighbourWeights& nb : taps.neighbours)
+      if (nb.frame == frames[k]) {
+        out.neighbours.push_back(nb);
+        out.neighbours.back().weight = std::move(weights.at(k));
+      }
+  return out;
+}
+
+FilterWeights historyWeights(const Image& own, const TemporalResult& result,
+                             const FilterWeights& taps, const TemporalOptions& options) {
+  if (result.pastHistories.empty()) return FilterWeights();
+  return pastWeights(taps, result.pastHistories.frames, historyTrust(own, result, options));
+}
+
+Image historyMean(const Image& own, const TemporalResult& result, const TemporalOptions& options) {
+  const PastHistories& past = result.pastHistories;
+  if (past.empty()) return own;
+  const std::vector<std::vector<double>> trust = historyTrust(own, result, options);
+  std::vector<Weighted> histories;
+  for (std::size_t k = 0; k < trust.size(); ++k) histories.push_back({&past.images[k], &trust[k]});
   const std::vector<double> mean = weightedMean(own, histories, options.threads).value;
   Image out = own;
   std::transform(mean.begin(), mean.end(), out.pixels.begin(),

@@ -4,10 +4,10 @@
 // reprojection and per-pixel weights: dn::temporal::Sequence's companions),
 // the view-dependent passes (glossy, transmission) only where the surface
 // stood still on screen; each light pass's render accumulated with the same
-// weights, denoised again and blended in, as the beauty's is; and the
-// residual set to the frame's denoised beauty minus the rest, so the
-// renderer's rule still holds exactly. The residual then holds what the
-// passes do not explain, not their flicker.
+// weights, denoised again, averaged with the past frames' and blended in, as
+// the beauty's is; and the residual set to the frame's denoised beauty minus
+// the rest, so the renderer's rule still holds exactly. The residual then
+// holds what the passes do not explain, not their flicker.
 #pragma once
 
 #include <map>

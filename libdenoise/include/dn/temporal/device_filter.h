@@ -76,8 +76,9 @@ struct DeviceFilterWeights {
 
 struct DevicePastHistories {
   std::vector<torch::Tensor> images, weights;
-  torch::Tensor scale;  // the frame's autoexposure (a 0-d tensor)
-  torch::Tensor noise;  // its render's local noise level per pixel
+  std::vector<std::size_t> frames;  // per image: its frame's index in the window
+  torch::Tensor scale;              // the frame's autoexposure (a 0-d tensor)
+  torch::Tensor noise;              // its render's local noise level per pixel
   bool empty() const { return images.empty(); }
 };
 
@@ -105,6 +106,9 @@ torch::Tensor historyMean(const torch::Tensor& own, const DeviceTemporalResult& 
                           const TemporalOptions& options = {});
 torch::Tensor blendWithHistory(const torch::Tensor& filtered, const torch::Tensor& accumulated,
                                double share);
+// historyWeights (temporal_filter.h) of a result on the device, on the host.
+FilterWeights historyWeights(const torch::Tensor& own, const DeviceTemporalResult& result,
+                             const FilterWeights& taps, const TemporalOptions& options = {});
 
 // The result's images and stats on the host, as filterFrame gives them; its
 // weights too where `withWeights` (they cost a copy of every neighbour's).

@@ -100,10 +100,10 @@ class Sequence {
   // The same, and the frame's companions by name, each filtered over the
   // window with the colour's weights (the same neighbours, taps and per-pixel
   // weights; dn::temporal::filterWith), or as made where not overTime; those
-  // with a render also blended with their accumulated render denoised, as
-  // the colour is. Each frame's are made once, by `companions.make`, for the
-  // frames the colour took something from, and kept while the frame is in
-  // the window.
+  // with a render also blended with their accumulated render denoised,
+  // averaged with the past frames' as the colour's is (historyWeights). Each
+  // frame's are made once, by `companions.make`, for the frames the colour
+  // took something from, and kept while the frame is in the window.
   struct WithCompanions {
     DenoiseResult result;
     std::map<std::string, Image> companions;
@@ -164,12 +164,14 @@ class Sequence {
   Image denoisedHistory(int number, const FrameBuffers& frame, TemporalResult& filtered,
                         const Denoise& denoise);
   // Makes the denoised histories of the frames within the window before `number`
-  // that lack one.
-  void makePastHistories(int number, const Read& read, const Denoise& denoise);
+  // that lack one, their companions' too where `companions` denoises them again.
+  void makePastHistories(int number, const Read& read, const Denoise& denoise,
+                         const CompanionMaker& companions);
   // A companion as the window holds it: its render in half floats where the
-  // file had it so, its image once the frame is in the past.
+  // file had it so, its image once the frame is in the past, and its history
+  // (its accumulated render denoised, else its image) in half floats.
   struct HeldCompanion {
-    WindowImage image, render;
+    WindowImage image, render, history;
     bool overTime = true, viewDependent = false;
   };
   using HeldCompanions = std::map<std::string, HeldCompanion>;
@@ -185,6 +187,15 @@ class Sequence {
   FilteredCompanions filteredCompanions(int number, const FrameBuffers& frame,
                                         const FilterWeights& weights, const CompanionMaker& make,
                                         bool accumulate);
+  // The companions' accumulated renders (of filteredCompanions) denoised again,
+  // each kept as the companion's history for the later frames, with those of
+  // the companions that have a render but were not accumulated.
+  std::map<std::string, Image> companionHistories(int number, const FrameBuffers& frame,
+                                                  const FilteredCompanions& passes,
+                                                  const CompanionMaker& make);
+  // A companion's history averaged with the past frames' (historyWeights).
+  Image companionHistoryMean(int number, const std::string& name, const Image& own,
+                             const FilterWeights& weights) const;
   // The frame on settings_.filterDevice, copied there on first use.
   const DeviceFrame& onDevice(Input& input) const;
   // The filtered colour blended with the accumulated render denoised (and

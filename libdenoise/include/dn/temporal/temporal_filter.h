@@ -196,8 +196,9 @@ struct PastHistories {
   std::vector<Image> images;
   // Per image and pixel: its result's weight where the surface stood still.
   std::vector<std::vector<double>> weights;
-  double scale = 1.0;        // the frame's autoexposure, and
-  std::vector<float> noise;  // its render's local noise level: the light test's scale
+  std::vector<std::size_t> frames;  // per image: its frame's index in the window
+  double scale = 1.0;               // the frame's autoexposure, and
+  std::vector<float> noise;         // its render's local noise level: the light test's scale
   bool empty() const { return images.empty(); }
 };
 
@@ -274,6 +275,23 @@ Image accumulateWith(const FilterWeights& weights, const std::vector<const Image
 // carries one.
 Image historyMean(const Image& own, const TemporalResult& result,
                   const TemporalOptions& options = {});
+
+// The weights historyMean gives the past histories, as FilterWeights over the
+// window (the frame's own weighs 1), so that any other image's histories (a
+// light pass's accumulated render, denoised) are averaged as the colour's:
+// filterWith with them, a relit or drifted neighbour's history brought to the
+// frame's light by its own factor (on the production-scale tuning half that
+// beat the factor of its image denoised alone, which the colour's history
+// takes: Diffuse Direct +0.06 dB against -0.11 on the sweeping sun's shot).
+// `taps`: result.weights, or FilterWeights that still hold its past
+// neighbours. Empty where no past neighbour carries a history.
+FilterWeights historyWeights(const Image& own, const TemporalResult& result,
+                             const FilterWeights& taps, const TemporalOptions& options = {});
+
+// `taps`' neighbours of window frames `frames`, in that order, each with the
+// weights given for it instead.
+FilterWeights pastWeights(const FilterWeights& taps, const std::vector<std::size_t>& frames,
+                          std::vector<std::vector<double>> weights);
 
 // (1 - share) filtered + share accumulated, per pixel: `accumulated` is
 // TemporalResult::history denoised (and averaged by historyMean). Where no
