@@ -279,12 +279,11 @@ Image historyMean(const Image& own, const TemporalResult& result,
 // The weights historyMean gives the past histories, as FilterWeights over the
 // window (the frame's own weighs 1), so that any other image's histories (a
 // light pass's accumulated render, denoised) are averaged as the colour's:
-// filterWith with them, a relit or drifted neighbour's history brought to the
-// frame's light by its own factor (on the production-scale tuning half that
-// beat the factor of its image denoised alone, which the colour's history
-// takes: Diffuse Direct +0.06 dB against -0.11 on the sweeping sun's shot).
-// `taps`: result.weights, or FilterWeights that still hold its past
-// neighbours. Empty where no past neighbour carries a history.
+// filterWith with them (a relit or drifted neighbour's history is then
+// brought to the frame's light by its own factor, the colour's by its
+// result's). `taps`: result.weights, or FilterWeights that still hold the
+// past neighbours wanted; those it lacks are left out. Empty where no past
+// neighbour carries a history.
 FilterWeights historyWeights(const Image& own, const TemporalResult& result,
                              const FilterWeights& taps, const TemporalOptions& options = {});
 
