@@ -79,8 +79,9 @@ def main():
     whole = run(base + ["-o", os.path.join(work, "whole.#.exr"), "-v"])
     lines = [l for l in whole.stderr.splitlines() if "from history" in l]
     check(len(lines) == len(FRAMES), f"-v reports history for each of the {len(FRAMES)} frames")
-    check("frame 1: " in lines[0] and "(2 neighbours" in lines[0], "the first frame has a one-sided window")
     check("(4 neighbours" in lines[2], "a middle frame has two neighbours on each side")
+    check("frame 1: " in lines[0] and "(4 neighbours" in lines[0] and "(4 neighbours" in lines[-1],
+          "the first and last frames take as many, all on the side the shot goes on")
     check(all("accumulated over" in l for l in lines), "-v says over how many frames each render was accumulated")
     # Two runs, 1-3 and 4-6, write the same bits as one run over 1-6.
     run(base + ["-o", os.path.join(work, "split.#.exr"), "--frames", "1-3"])

@@ -100,6 +100,28 @@ TEST_CASE("a sequence hands each frame back as read, each file decoded once") {
   CHECK_THROWS_AS(shot->frame(unplanned, counted.read), std::invalid_argument);
 }
 
+TEST_CASE("every frame of a shot is filtered over as many frames as its middle ones") {
+  // A side cut short by the shot's ends is made up for on the other side.
+  CountedShot counted;
+  temporal::SequenceSettings settings;
+  settings.radius = 2;
+  auto shot = counted.plan(settings);
+  REQUIRE(shot);
+  for (const auto& file : counted.files) {
+    CAPTURE(file);
+    const FrameBuffers frame = shot->frame(file, counted.read);
+    shot->denoise(file, frame, counted.read, asRendered);
+    CHECK(shot->lastStats().neighbours == 4);
+  }
+  for (const auto& file : counted.files) CHECK(counted.decoded[file] == 1);
+  // Beyond twice the radius on one side, no more.
+  settings.radius = 1;
+  shot = counted.plan(settings);
+  const std::string first = counted.files.front();
+  shot->denoise(first, shot->frame(first, counted.read), counted.read, asRendered);
+  CHECK(shot->lastStats().neighbours == 2);
+}
+
 TEST_CASE("a neighbour's companions are made from the frame as read, each file decoded once") {
   CountedShot counted;
   auto shot = counted.plan();

@@ -92,7 +92,9 @@ output:
                       renders the same way, denoises that too and blends the
                       two; filter: the average of results alone (one network
                       pass a frame, not two); off: every frame alone
-  --window N          neighbours on each side for --temporal, 1-8 (default 4)
+  --window N          neighbours on each side for --temporal, 1-8 (default 4);
+                      near a shot's ends, those one side lacks are taken
+                      from the other (2N+1 frames wherever the shot has them)
   --temporal-trust learned|rules
                       how --temporal weighs each neighbour per pixel: the
                       hand-set light and colour tests (rules, the default), or

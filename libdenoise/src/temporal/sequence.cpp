@@ -306,27 +306,40 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   return estimates_[number] = result;
 }
 
+Sequence::Span Sequence::windowOf(int number) const {
+  const int radius = settings_.radius;
+  auto filesOn = [&](int side) {  // up to 2 radius, a missing file ends the side
+    int k = 0;
+    while (k < 2 * radius && !fileOf(number + side * (k + 1)).empty()) ++k;
+    return k;
+  };
+  const int past = filesOn(-1), future = filesOn(1);
+  return {number - std::min(past, 2 * radius - std::min(future, radius)),
+          number + std::min(future, 2 * radius - std::min(past, radius))};
+}
+
 void Sequence::forget(int number) {
-  // Memory stays bounded by the window: what lies behind it is dropped.
-  keepWithin(inputs_, number - settings_.radius, number + settings_.radius);
-  keepWithin(estimates_, number - settings_.radius, number + settings_.radius);
+  // Memory stays bounded by the window: what lies outside it is dropped.
+  const Span window = windowOf(number);
+  keepWithin(inputs_, window.first, window.last);
+  keepWithin(estimates_, window.first, window.last);
 }
 
 Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, const Read& read,
                                       const Denoise& denoise) {
-  const int radius = settings_.radius;
+  const Span span = windowOf(number);
   Filtered out;
   out.alone = estimate(number, given, read, denoise);
   if (!out.alone) return out;
   const WindowImage& own = input(number, nullptr, read)->frame.denoised;
   std::vector<const WindowFrame*> window;
   std::vector<const DeviceFrame*> deviceWindow;
-  for (int m = number - radius; m <= number + radius; ++m) {
+  for (int m = span.first; m <= span.last; ++m) {
     // Whichever call made them, the filter sees the past frames so (a shot
     // split into runs gives the same bits); held so before the later frames
     // are denoised.
     if (m == number)
-      for (int p = number - radius; p < number; ++p)
+      for (int p = span.first; p < number; ++p)
         if (auto past = inputs_.find(p); past != inputs_.end())
           past->second->enterPast(settings_.filterDevice);
     auto source = estimate(m, nullptr, read, denoise) ? input(m, nullptr, read) : nullptr;
@@ -339,12 +352,13 @@ Sequence::Filtered Sequence::filtered(int number, const FrameBuffers* given, con
     if (settings_.filterDevice) deviceWindow.push_back(usable ? &onDevice(*source) : nullptr);
   }
   TemporalOptions options = settings_.filter;
-  options.radius = radius;
+  const auto centre = static_cast<std::size_t>(number - span.first);
+  options.radius = std::max(number - span.first, span.last - number);
   if (!settings_.filterDevice) {
-    out.result = filterFrame(window, radius, options);
+    out.result = filterFrame(window, centre, options);
     return out;
   }
-  out.device = filterFrame(deviceWindow, radius, options);
+  out.device = filterFrame(deviceWindow, centre, options);
   out.result.stats = out.device->stats;
   if (out.device->history.defined())  // the network's input
     out.result.history = pixelsToImage(out.device->history, own.width(), own.height());
@@ -386,7 +400,7 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalR
 void Sequence::makePastHistories(int number, const Read& read, const Denoise& denoise,
                                  const CompanionMaker& companions) {
   const bool again = companions.make && companions.denoiseAccumulated;
-  for (int m = number - settings_.radius; m < number; ++m) {
+  for (int m = windowOf(number).first; m < number; ++m) {
     auto past = input(m, nullptr, read);
     if (!past) continue;
     const bool colour = past->frame.history.empty();
@@ -429,7 +443,7 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Fram
                                                           const FilterWeights& weights,
                                                           const CompanionMaker& make,
                                                           bool accumulate) {
-  // Window index k is frame number - radius + k; only the frames the colour
+  // Window index k is frame number - centre + k; only the frames the colour
   // took something from are needed.
   const int first = number - static_cast<int>(weights.centre);
   std::map<std::size_t, const HeldCompanions*> made;

@@ -27,7 +27,9 @@
 namespace dn::temporal {
 
 struct SequenceSettings {
-  int radius = 4;          // neighbours on each side
+  // Neighbours on each side; where a side has fewer (a shot's first and last
+  // frames), as many more on the other, up to twice this.
+  int radius = 4;
   std::string motion;      // motion vectors from separate files: a pattern (mv.#.exr)
   ReadOptions read;        // the view layer and channel overrides
   TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
@@ -202,6 +204,15 @@ class Sequence {
   // averaged with the past frames'), on the device; the result copied back.
   Image blendOnDevice(int number, const DeviceTemporalResult& filtered, double share) const;
   std::string fileOf(int number) const;
+  // The frames filtered with frame `number`, its own included: settings_.radius
+  // on each side, and where a side has fewer files (a shot's ends), as many
+  // more on the other, so that every frame of a shot is filtered over as
+  // many frames as its middle ones.
+  struct Span {
+    int first, last;
+  };
+  Span windowOf(int number) const;
+  // Drops what lies outside frame `number`'s window.
   void forget(int number);
   // aloneBecause() of the frame held as `input`, filtered as `filtered`.
   static std::string aloneBecause(const Input& input, const Filtered& filtered);
