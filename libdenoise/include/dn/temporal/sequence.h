@@ -32,7 +32,7 @@ struct SequenceSettings {
   int radius = 4;
   std::string motion;      // motion vectors from separate files: a pattern (mv.#.exr)
   ReadOptions read;        // the view layer and channel overrides
-  TemporalOptions filter;  // the rejection thresholds (its radius is `radius`)
+  TemporalOptions filter;  // the rejection thresholds (its radius: each frame's window)
   // Where set, a frame's WindowFrame::viewDependent, from its file and its
   // buffers as Read gives them (empty where the file cannot tell); dndenoise
   // sets dn::viewDependentShare (dn/passes/sequence_passes.h).
