@@ -101,6 +101,9 @@ int run(Options o, int argc, char** argv) {
       for (const auto& note : frame.notes) fmt::print(stderr, "dndenoise: {}: {}\n", name, note);
       reportInputStatistics(name, frame.get("color"));
     }
+    // The window holds the frame while the networks run; it is put back
+    // together once denoised.
+    if (sequence) frame = FrameBuffers();
 
     DenoiseOptions options = o.denoise;
     options.device = torch::Device(o.device);
@@ -126,12 +129,12 @@ int run(Options o, int argc, char** argv) {
       const auto t0 = Clock::now();
       try {
         if (passesOverTime) {
-          auto both = sequence->denoise(input, frame, readFile, alone,
-                                        lightPassCompanions(passBase, passOptions));
+          auto both =
+              sequence->denoise(input, readFile, alone, lightPassCompanions(passBase, passOptions));
           result = std::move(both.result);
           filteredPasses = std::move(both.companions);
         } else {
-          result = sequence ? sequence->denoise(input, frame, readFile, alone)
+          result = sequence ? sequence->denoise(input, readFile, alone)
                             : denoiser.denoise(frame, options);
         }
       } catch (const std::invalid_argument& e) {
@@ -140,6 +143,7 @@ int run(Options o, int argc, char** argv) {
       times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
     }
     if (progress) progress->finish();
+    if (sequence) frame = sequence->frame(input, readFile);
     if (o.verbose && sequence) fmt::print(stderr, "dndenoise: {}: {}\n", name, sequence->report());
     if (sequence && !sequence->aloneBecause().empty())
       fmt::print(stderr, "dndenoise: {}: {}\n", name, sequence->aloneBecause());

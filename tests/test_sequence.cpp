@@ -1,6 +1,7 @@
 // dn::temporal::Sequence on the committed Blender sequence (testdata/sequence):
 // the frame it hands back, and the frame a neighbour's companions are made
-// from, is the frame as read, and each file is decoded once over a whole shot.
+// from, is the frame as read (but for a normal the prefilter has cleaned, then
+// a guide in half floats), and each file is decoded once over a whole shot.
 #include "doctest_torch.h"
 
 #include <algorithm>
@@ -120,6 +121,69 @@ TEST_CASE("every frame of a shot is filtered over as many frames as its middle o
   const std::string first = counted.files.front();
   shot->denoise(first, shot->frame(first, counted.read), counted.read, asRendered);
   CHECK(shot->lastStats().neighbours == 2);
+}
+
+// A stand-in for a denoiser with the prefilter: the render as it is, and the
+// albedo and normal "cleaned" (here: as read).
+DenoiseResult asRenderedCleaned(const std::string& path, const FrameBuffers& frame) {
+  DenoiseResult result = asRendered(path, frame);
+  result.cleanAlbedo = frame.get("albedo");
+  result.cleanNormal = frame.get("normal");
+  return result;
+}
+
+TEST_CASE("once cleaned, a frame's normal is held as a guide in half floats, unless asked") {
+  for (const bool asRead : {false, true}) {
+    CAPTURE(asRead);
+    temporal::SequenceSettings settings;
+    settings.framesAsRead = asRead;
+    CountedShot counted;
+    auto shot = counted.plan(settings);
+    REQUIRE(shot);
+    const std::string first = counted.files.front(), second = counted.files[1];
+    shot->denoise(first, shot->frame(first, counted.read), counted.read, asRenderedCleaned);
+    // The second frame, a neighbour of the first, is held denoised.
+    const FrameBuffers held = shot->frame(second, counted.read);
+    const FrameBuffers read = readFrame(second);
+    CHECK(held.get("color").pixels == read.get("color").pixels);
+    CHECK(held.get("albedo").pixels == read.get("albedo").pixels);
+    const Image& normal = held.get("normal");
+    REQUIRE(normal.sameShape(read.get("normal")));
+    double worst = 0.0;
+    for (std::size_t i = 0; i < normal.pixels.size(); ++i)
+      worst = std::max(worst, std::abs(double(normal.pixels[i]) - read.get("normal").pixels[i]));
+    if (asRead) {
+      CHECK(normal.pixels == read.get("normal").pixels);
+    } else {
+      CHECK(worst > 0.0);                    // the file's normal is in floats
+      CHECK(worst <= std::ldexp(1.0, -11));  // a unit vector's components in half floats
+    }
+  }
+}
+
+TEST_CASE("a frame denoised from the window gives the same bits as from the caller's copy") {
+  // With the prefilter's stand-in, so that the accumulated renders are
+  // denoised again on the frame as the window holds it.
+  auto cleanedBlur = [](const std::string& path, const FrameBuffers& frame) {
+    DenoiseResult result = asRenderedCleaned(path, frame);
+    result.color = blurred(result.color);
+    return result;
+  };
+  CountedShot given, fromWindow;
+  auto withCopy = given.plan(), without = fromWindow.plan();
+  REQUIRE((withCopy && without));
+  int accumulated = 0;
+  for (const auto& file : given.files) {
+    CAPTURE(file);
+    const FrameBuffers frame = withCopy->frame(file, given.read);
+    const Image a = withCopy->denoise(file, frame, given.read, cleanedBlur).color;
+    const Image b = without->denoise(file, fromWindow.read, cleanedBlur).color;
+    CHECK(a.pixels == b.pixels);
+    CHECK(without->lastStats().accumulatedFrames == withCopy->lastStats().accumulatedFrames);
+    accumulated += without->lastStats().accumulatedFrames > 1.0;
+  }
+  CHECK(accumulated >= 4);
+  for (const auto& file : fromWindow.files) CHECK(fromWindow.decoded[file] == 1);
 }
 
 TEST_CASE("a neighbour's companions are made from the frame as read, each file decoded once") {

@@ -1,8 +1,8 @@
 // Half floats in the temporal window: the conversions against IEEE binary16
 // (every half exactly, floats rounded to the nearest with ties to even, the
 // processor's F16C path the same bits as the portable one), packing that keeps
-// a half-float file's values bit for bit, and the rounding of packed results
-// within half's precision at any exposure.
+// a half-float file's values bit for bit, an image of one value as that value,
+// and the rounding of packed results within half's precision at any exposure.
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -115,6 +115,32 @@ TEST_CASE("packing keeps a half-float file's values bit for bit, and others in f
   inFloats.packIfExact();
   CHECK_FALSE(inFloats.packed());
   CHECK(inFloats.floats().pixels == rendered.pixels);
+}
+
+TEST_CASE("an image of one value is held as that value, bit for bit, whatever the value") {
+  for (const float value : {1.0f, 0.1f, -0.0f, std::numeric_limits<float>::infinity()}) {
+    CAPTURE(value);
+    const Image ones(7, 4, 1, value);
+    WindowImage exact(ones), rounded(ones);
+    exact.packIfExact();
+    rounded.pack();
+    for (const WindowImage* held : {&exact, &rounded}) {
+      CHECK(held->packed());
+      CHECK(held->bytes() == 0);
+      CHECK((held->width() == 7 && held->height() == 4 && held->channels() == 1));
+      const Image back = held->toImage();
+      REQUIRE(back.sameShape(ones));
+      for (float v : back.pixels) CHECK(std::signbit(v) == std::signbit(value));
+      CHECK(back.pixels == ones.pixels);
+    }
+  }
+  // One value's bits differ: -0 is not 0.
+  Image almost(3, 3, 1, 0.0f);
+  almost.pixels[4] = -0.0f;
+  WindowImage held(almost);
+  held.packIfExact();
+  CHECK(held.bytes() == almost.pixels.size() * 2);
+  CHECK(std::signbit(held.toImage().pixels[4]));
 }
 
 TEST_CASE("a packed result keeps 11 significant bits, from a dark frame to a visible sun") {

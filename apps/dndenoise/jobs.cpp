@@ -103,6 +103,8 @@ std::unique_ptr<temporal::Sequence> planSequence(const Options& o, const Jobs& j
   temporal::SequenceSettings settings = o.sequence;
   settings.read = o.read;
   settings.filter.threads = torch::get_num_threads();
+  // Each frame's passes are then denoised from its buffers as read.
+  settings.framesAsRead = o.passes && o.passesOverTime == PassesOverTime::Off;
   // On CUDA the filter runs there too, the window's frames kept on the GPU.
   if (o.temporalFilter == "tensors" || (o.temporalFilter == "auto" && o.device == "cuda"))
     settings.filterDevice = torch::Device(o.device);

@@ -29,6 +29,11 @@ constexpr std::size_t kHeader = 64;
 // Large blocks are whole huge pages: a 1080p network's activations otherwise
 // fault in 4 KiB at a time, which was a fifth of -q fast's CPU time.
 constexpr std::size_t kHugePage = std::size_t(2) << 20;
+// Operator new's blocks are whole 64 KiB: they hold images, many of them for
+// long (a sequence's window), and whole huge pages would add up to 2 MiB to
+// each (a 1080p frame's 4.2 MiB depth took 6). The arena's huge pages are
+// the kernel's to place, whatever the blocks in them.
+constexpr std::size_t kNewGranule = std::size_t(64) << 10;
 // Addresses reserved for large blocks; only what is touched takes memory.
 // Under a limit on the address space (ulimit -v, as some farms set) half of
 // it at most, so that the rest of the process keeps room.
@@ -114,7 +119,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
 
   void* take(std::size_t bytes) {
     if (bytes >= kMinCachedBlock)
-      if (void* data = takeFromArena(bytes)) return data;
+      if (void* data = takeFromArena(bytes, kHugePage)) return data;
     char* block = static_cast<char*>(bytes >= kHugePage ? allocHuge(bytes + kHeader)
                                                         : c10::alloc_cpu(bytes + kHeader));
     *reinterpret_cast<std::size_t*>(block) = bytes + kHeader;
@@ -122,12 +127,12 @@ class ReusingCpuAllocator final : public c10::Allocator {
   }
 
  public:
-  // A block of at least `bytes` from the arena (a tensor's, or operator
-  // new's); null where there is none (no arena, or full).
-  void* takeFromArena(std::size_t bytes) {
+  // A block of at least `bytes` from the arena, in whole `granule`s (a
+  // tensor's, or operator new's); null where there is none (no arena, or full).
+  void* takeFromArena(std::size_t bytes, std::size_t granule) {
     if (!base_) return nullptr;
     std::lock_guard<std::mutex> lock(mutex_);
-    char* block = carveArena(roundUp(bytes + kHeader, kHugePage));
+    char* block = carveArena(roundUp(bytes + kHeader, granule));
     return block ? block + kHeader : nullptr;
   }
   bool owns(const void* data) const { return inArena(static_cast<const char*>(data) - kHeader); }
@@ -144,7 +149,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
   }
 
  private:
-  // A block of `length` (whole huge pages) from the arena, or null when it is full.
+  // A block of `length` (whole granules) from the arena, or null when it is full.
   char* carveArena(std::size_t length) {
     std::optional<std::size_t> offset = takeBestFit(cachedBySize_, length);
     if (!offset) offset = extendTopRange(length);
@@ -288,7 +293,8 @@ void useReusingAllocatorForNew() {
 void* operator new(std::size_t bytes) {
   using dn::ReusingCpuAllocator;
   if (dn::forNew && bytes >= dn::kMinCachedBlock)
-    if (void* block = ReusingCpuAllocator::instance().takeFromArena(bytes)) return block;
+    if (void* block = ReusingCpuAllocator::instance().takeFromArena(bytes, dn::kNewGranule))
+      return block;
   for (;;) {
     if (void* block = std::malloc(bytes ? bytes : 1)) return block;
     std::new_handler handler = std::get_new_handler();

@@ -21,8 +21,8 @@ const char* const kHeldInWindow[] = {"color", "albedo", "normal", "depth"};
 
 // A frame as read: its guides and motion, its noisy colour and, once denoised
 // alone, its result. The buffers the model reads are dropped once denoised,
-// and the window holds its images in half floats where that loses nothing
-// (WindowFrame), so a window of 1080p frames holds about 0.12 GB a frame.
+// and the window holds its images in half floats (WindowFrame), so a window
+// of 1080p frames holds about 0.11 GB a frame.
 struct Sequence::Input {
   // What the model reads; once denoised, all but the colour, albedo, normal
   // and depth, which `frame` holds (Sequence::frame puts them back), and the alpha.
@@ -48,16 +48,15 @@ struct Sequence::Input {
     frame.viewDependent = WindowImage();
   }
 
-  // Once the frame is before the one filtered, its result and history are
-  // held in half floats, and its copy on the device holds the same values.
+  // Once the frame is before the one filtered, its companions kept as made
+  // are read no more, and its copy on the device holds its history as the
+  // window does, in half floats.
   void enterPast(const std::optional<torch::Device>& device) {
     if (std::exchange(inPast, true)) return;
-    frame.denoised.pack();
     if (companions)
-      for (auto& [name, companion] : *companions) companion.image.pack();
-    if (!onDevice) return;
-    onDevice->denoised = pixelsToDevice(frame.denoised.toImage(), *device);
-    onDevice->history = pixelsToDevice(frame.history.toImage(), *device);
+      for (auto& [name, companion] : *companions)
+        if (!companion.overTime) companion.image = WindowImage();
+    if (onDevice) onDevice->history = pixelsToDevice(frame.history.toImage(), *device);
   }
 
   // The window's copies of the buffers of kHeldInWindow, in its order.
@@ -114,9 +113,8 @@ motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
 
 // The frame with its colour replaced by the accumulated render, and its
 // albedo and normal by the prefilter's where its first denoising cleaned them.
-FrameBuffers withHistory(const FrameBuffers& frame, Image history, const WindowImage& cleanAlbedo,
+FrameBuffers withHistory(FrameBuffers out, Image history, const WindowImage& cleanAlbedo,
                          const WindowImage& cleanNormal) {
-  FrameBuffers out = frame;
   out.buffers["color"] = std::move(history);
   if (!cleanAlbedo.empty() && !cleanNormal.empty()) {
     out.buffers["albedo"] = cleanAlbedo.toImage();
@@ -298,11 +296,17 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   auto result =
       std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
   self->holdInWindow();
-  self->frame.denoised = std::move(result->color);  // the filter's input, held once
+  // The filter's input, held once, in half floats: the window holds it from
+  // the frame ahead that is denoised first to the frame behind dropped last.
+  self->frame.denoised = std::move(result->color);
+  self->frame.denoised.pack();
   self->cleanAlbedo = std::move(result->cleanAlbedo);
   self->cleanNormal = std::move(result->cleanNormal);
   self->cleanAlbedo.pack();
   self->cleanNormal.pack();
+  // Once cleaned, no network of the sequence reads the file's normal again
+  // (withHistory gives the clean one): it is a guide, held in half floats too.
+  if (!self->cleanNormal.empty() && !settings_.framesAsRead) self->frame.guides.normal.pack();
   return estimates_[number] = result;
 }
 
@@ -379,12 +383,13 @@ Image Sequence::blendOnDevice(int number, const DeviceTemporalResult& filtered,
   return pixelsToImage(color, self.width, self.height);
 }
 
-Image Sequence::denoisedHistory(int number, const FrameBuffers& frame, TemporalResult& filtered,
+Image Sequence::denoisedHistory(int number, const FrameBuffers* given, TemporalResult& filtered,
                                 const Denoise& denoise) {
   Input& self = *inputs_.at(number);
   // Where no neighbour was trusted the history is the frame's own render.
   Image history = filtered.stats.accumulatedFrames > 1.0
-                      ? denoise(fileOf(number), withHistory(frame, std::move(filtered.history),
+                      ? denoise(fileOf(number), withHistory(given ? *given : self.readAgain(),
+                                                            std::move(filtered.history),
                                                             self.cleanAlbedo, self.cleanNormal))
                             .color
                       : self.frame.denoised.toImage();
@@ -408,48 +413,48 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
     forget(m);  // its window only, so memory stays bounded at a run's start too
     Filtered earlier = filtered(m, nullptr, read, denoise);
     if (!earlier.alone) continue;
-    const FrameBuffers frame = past->readAgain();
     if (again) {
       const FilterWeights weights =
           earlier.device ? earlier.device->weights.toHost() : std::move(earlier.result.weights);
-      companionHistories(m, frame,
-                         filteredCompanions(m, frame, weights, companions,
-                                            earlier.result.stats.accumulatedFrames > 1.0),
-                         companions);
+      companionHistories(
+          m, nullptr,
+          filteredCompanions(m, weights, companions, earlier.result.stats.accumulatedFrames > 1.0),
+          companions);
     }
     earlier.result.weights = FilterWeights();
-    if (colour) denoisedHistory(m, frame, earlier.result, denoise);
+    if (colour) denoisedHistory(m, nullptr, earlier.result, denoise);
   }
 }
 
-const Sequence::HeldCompanions& Sequence::companionsOf(int number, const FrameBuffers* given,
-                                                       const CompanionMaker& make) {
+const Sequence::HeldCompanions& Sequence::companionsOf(int number, const CompanionMaker& make) {
   Input& entry = *inputs_.at(number);
   if (!entry.companions) {
     entry.companions.emplace();
-    for (auto& [name, made] : make.make(fileOf(number), given ? *given : entry.readAgain())) {
+    for (auto& [name, made] : make.make(fileOf(number), entry.readAgain())) {
       HeldCompanion& held = (*entry.companions)[name];
       held.image = std::move(made.image);
       held.render = std::move(made.render);
       held.overTime = made.overTime, held.viewDependent = made.viewDependent;
       held.render.packIfExact();
-      if (entry.inPast) held.image.pack();
+      if (held.overTime)
+        held.image.pack();  // as the colour's result is
+      else if (entry.inPast)
+        held.image = WindowImage();  // only the frame filtered reads it
     }
   }
   return *entry.companions;
 }
 
-Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const FrameBuffers& frame,
-                                                          const FilterWeights& weights,
+Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const FilterWeights& weights,
                                                           const CompanionMaker& make,
                                                           bool accumulate) {
   // Window index k is frame number - centre + k; only the frames the colour
   // took something from are needed.
   const int first = number - static_cast<int>(weights.centre);
   std::map<std::size_t, const HeldCompanions*> made;
-  made[weights.centre] = &companionsOf(number, &frame, make);
+  made[weights.centre] = &companionsOf(number, make);
   for (const NeighbourWeights& nb : weights.neighbours)
-    made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), nullptr, make);
+    made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), make);
   const std::size_t size = made.rbegin()->first + 1;
   FilteredCompanions out;
   for (const auto& [name, own] : *made.at(weights.centre)) {
@@ -482,14 +487,16 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Fram
   return out;
 }
 
-std::map<std::string, Image> Sequence::companionHistories(int number, const FrameBuffers& frame,
+std::map<std::string, Image> Sequence::companionHistories(int number, const FrameBuffers* given,
                                                           const FilteredCompanions& passes,
                                                           const CompanionMaker& make) {
   Input& input = *inputs_.at(number);
   std::map<std::string, Image> again;
   if (!passes.accumulated.empty()) {
+    FrameBuffers frame = given ? *given : input.readAgain();
+    Image color = frame.get("color");
     const FrameBuffers guides =
-        withHistory(frame, frame.get("color"), input.cleanAlbedo, input.cleanNormal);
+        withHistory(std::move(frame), std::move(color), input.cleanAlbedo, input.cleanNormal);
     again = make.denoiseAccumulated(guides, passes.accumulated);
   }
   // Where nothing was accumulated the history is the companion itself, as
@@ -523,12 +530,28 @@ Image Sequence::companionHistoryMean(int number, const std::string& name, const 
 
 DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
                                 const Read& read, const Denoise& denoise) {
-  return this->denoise(file, frame, read, denoise, CompanionMaker()).result;
+  return denoiseFrame(file, &frame, read, denoise, CompanionMaker()).result;
 }
 
 Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameBuffers& frame,
                                            const Read& read, const Denoise& denoise,
                                            const CompanionMaker& companions) {
+  return denoiseFrame(file, &frame, read, denoise, companions);
+}
+
+DenoiseResult Sequence::denoise(const std::string& file, const Read& read, const Denoise& denoise) {
+  return denoiseFrame(file, nullptr, read, denoise, CompanionMaker()).result;
+}
+
+Sequence::WithCompanions Sequence::denoise(const std::string& file, const Read& read,
+                                           const Denoise& denoise,
+                                           const CompanionMaker& companions) {
+  return denoiseFrame(file, nullptr, read, denoise, companions);
+}
+
+Sequence::WithCompanions Sequence::denoiseFrame(const std::string& file, const FrameBuffers* given,
+                                                const Read& read, const Denoise& denoise,
+                                                const CompanionMaker& companions) {
   const int n = numbers_.at(file);
   forget(n);
   lastNumber_ = n;
@@ -538,7 +561,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   if (share > 0.0) makePastHistories(n, read, denoise, companions);
   for (auto& [number, past] : inputs_)
     if (number < n) past->dropOwnUse();
-  Filtered self = filtered(n, &frame, read, denoise);
+  Filtered self = filtered(n, given, read, denoise);
   lastStats_ = self.result.stats;
   lastAloneBecause_ = aloneBecause(*inputs_.at(n), self);
   WithCompanions out{*self.alone, {}};
@@ -551,7 +574,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   if (companions.make) {
     FilterWeights weights =
         self.device ? self.device->weights.toHost() : std::move(self.result.weights);
-    passes = filteredCompanions(n, frame, weights, companions,
+    passes = filteredCompanions(n, weights, companions,
                                 again && self.result.stats.accumulatedFrames > 1.0);
     if (again)
       pastTaps =
@@ -563,7 +586,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   FilterWeights pastHistories;  // the colour's history weights, for the companions'
   if (self.device) {
     self.device->weights = DeviceFilterWeights();
-    if (share > 0.0) denoisedHistory(n, frame, self.result, denoise);
+    if (share > 0.0) denoisedHistory(n, given, self.result, denoise);
     if (again)
       pastHistories = historyWeights(inputs_.at(n)->onDevice->history, *self.device, pastTaps,
                                      settings_.filter);
@@ -571,7 +594,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   } else {
     result.color = std::move(self.result.color);
     if (share > 0.0) {
-      const Image own = denoisedHistory(n, frame, self.result, denoise);
+      const Image own = denoisedHistory(n, given, self.result, denoise);
       result.color =
           blendWithHistory(result.color, historyMean(own, self.result, settings_.filter), share);
       if (again) pastHistories = historyWeights(own, self.result, pastTaps, settings_.filter);
@@ -579,7 +602,7 @@ Sequence::WithCompanions Sequence::denoise(const std::string& file, const FrameB
   }
   pastTaps = FilterWeights();
   if (again)
-    for (const auto& [name, own] : companionHistories(n, frame, passes, companions))
+    for (const auto& [name, own] : companionHistories(n, given, passes, companions))
       passes.filtered.at(name) = blendWithHistory(
           passes.filtered.at(name), companionHistoryMean(n, name, own, pastHistories), share);
   out.companions = std::move(passes.filtered);
@@ -597,7 +620,7 @@ DenoiseResult Sequence::denoise(const std::string& file, const Denoiser& denoise
   const Denoise alone = [&](const std::string&, const FrameBuffers& frame) {
     return denoiser.denoise(frame, options);
   };
-  return denoise(file, read(file, {}), read, alone);
+  return denoise(file, read, alone);
 }
 
 std::string Sequence::report() const {

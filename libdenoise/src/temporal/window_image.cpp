@@ -114,8 +114,18 @@ void toFloats(const std::uint16_t* in, std::size_t count, float scale, float* ou
   for (; i < count; ++i) out[i] = floatOf(in[i]) * scale;
 }
 
+bool WindowImage::packIfConstant() {
+  const std::vector<float>& v = floats_.pixels;
+  const std::uint32_t first = bitsOf(v.front());
+  if (!std::all_of(v.begin(), v.end(), [&](float x) { return bitsOf(x) == first; })) return false;
+  constant_ = true;
+  value_ = v.front();
+  floats_.pixels = std::vector<float>();
+  return true;
+}
+
 void WindowImage::packIfExact() {
-  if (packed() || floats_.empty()) return;
+  if (packed() || floats_.empty() || packIfConstant()) return;
   std::vector<std::uint16_t> halves(floats_.pixels.size());
   toHalves(floats_.pixels.data(), halves.size(), 1.0f, halves.data());
   for (std::size_t i = 0; i < halves.size(); ++i)
@@ -126,7 +136,7 @@ void WindowImage::packIfExact() {
 }
 
 void WindowImage::pack() {
-  if (packed() || floats_.empty()) return;
+  if (packed() || floats_.empty() || packIfConstant()) return;
   if (!std::all_of(floats_.pixels.begin(), floats_.pixels.end(),
                    [](float v) { return std::isfinite(v); }))
     return;
@@ -142,6 +152,10 @@ std::size_t WindowImage::bytes() const {
 
 const Image& WindowImage::floats(Image& scratch) const {
   if (!packed()) return floats_;
+  if (constant_) {
+    scratch = Image(floats_.width, floats_.height, floats_.channels, value_);
+    return scratch;
+  }
   scratch = Image(floats_.width, floats_.height, floats_.channels);
   toFloats(halves_.data(), halves_.size(), std::ldexp(1.0f, -exponent_), scratch.pixels.data());
   return scratch;

@@ -47,6 +47,11 @@ struct SequenceSettings {
   // frame copied there once and kept while in the window, the colour copied
   // back once filtered and blended. dndenoise sets it with --device cuda.
   std::optional<torch::Device> filterDevice;
+  // Set where the caller denoises a frame's buffers (Sequence::frame) again as
+  // read (dndenoise --passes-temporal off): the window then holds the file's
+  // normal bit for bit even once the prefilter has cleaned it (12 MB more a
+  // 1080p frame).
+  bool framesAsRead = false;
 };
 
 // An image made per frame beside its colour (a renderer's light pass,
@@ -112,14 +117,23 @@ class Sequence {
   };
   WithCompanions denoise(const std::string& file, const FrameBuffers& frame, const Read& read,
                          const Denoise& denoise, const CompanionMaker& companions);
+  // The same, the frame put back together from the window (Sequence::frame)
+  // only where needed: the caller holds no copy of it while the networks run
+  // (76 MB of a 1080p frame's colour, albedo and normal in floats).
+  DenoiseResult denoise(const std::string& file, const Read& read, const Denoise& denoise);
+  WithCompanions denoise(const std::string& file, const Read& read, const Denoise& denoise,
+                         const CompanionMaker& companions);
   // The same with `denoiser`: each frame read with the buffers it needs.
   DenoiseResult denoise(const std::string& file, const Denoiser& denoiser,
                         const DenoiseOptions& options);
 
   // The buffers of `file` (one of the planned files) as `read` gives them:
   // put back together from what the window holds where it holds the frame,
-  // else read (and then held), so that each file is decoded once. Throws
-  // std::invalid_argument for a file not planned, or gone.
+  // else read (and then held), so that each file is decoded once. Once the
+  // frame is denoised with its albedo and normal cleaned (the prefilter), its
+  // normal is a guide only, held in half floats, unless
+  // SequenceSettings::framesAsRead. Throws std::invalid_argument for a file
+  // not planned, or gone.
   FrameBuffers frame(const std::string& file, const Read& read);
 
   // What the sequence asks Read for beside the buffers of file `path`: the
@@ -162,37 +176,41 @@ class Sequence {
   };
   Filtered filtered(int number, const FrameBuffers* given, const Read& read,
                     const Denoise& denoise);
-  // The frame's accumulated render (of `filtered`) denoised, kept for its successors.
-  Image denoisedHistory(int number, const FrameBuffers& frame, TemporalResult& filtered,
+  // The denoise calls above: `given`, the caller's copy of the frame, or null.
+  WithCompanions denoiseFrame(const std::string& file, const FrameBuffers* given, const Read& read,
+                              const Denoise& denoise, const CompanionMaker& companions);
+  // The frame's accumulated render (of `filtered`) denoised, kept for its
+  // successors; the frame `given`, else as the window holds it.
+  Image denoisedHistory(int number, const FrameBuffers* given, TemporalResult& filtered,
                         const Denoise& denoise);
   // Makes the denoised histories of the frames within the window before `number`
   // that lack one, their companions' too where `companions` denoises them again.
   void makePastHistories(int number, const Read& read, const Denoise& denoise,
                          const CompanionMaker& companions);
   // A companion as the window holds it: its render in half floats where the
-  // file had it so, its image once the frame is in the past, and its history
-  // (its accumulated render denoised, else its image) in half floats.
+  // file had it so, its image and its history (its accumulated render
+  // denoised, else its image) in half floats, as the colour's; one kept as
+  // made in floats, until the frame is in the past.
   struct HeldCompanion {
     WindowImage image, render, history;
     bool overTime = true, viewDependent = false;
   };
   using HeldCompanions = std::map<std::string, HeldCompanion>;
-  // Frame `number`'s companions, made by `make` (from `given`, or the frame
-  // as the window holds it) if not yet.
-  const HeldCompanions& companionsOf(int number, const FrameBuffers* given,
-                                     const CompanionMaker& make);
+  // Frame `number`'s companions, made by `make` from the frame as the window
+  // holds it (Sequence::frame), if not yet.
+  const HeldCompanions& companionsOf(int number, const CompanionMaker& make);
   // The companions filtered over the window, and those with a render
   // accumulated (by name).
   struct FilteredCompanions {
     std::map<std::string, Image> filtered, accumulated;
   };
-  FilteredCompanions filteredCompanions(int number, const FrameBuffers& frame,
-                                        const FilterWeights& weights, const CompanionMaker& make,
-                                        bool accumulate);
-  // The companions' accumulated renders (of filteredCompanions) denoised again,
-  // each kept as the companion's history for the later frames, with those of
-  // the companions that have a render but were not accumulated.
-  std::map<std::string, Image> companionHistories(int number, const FrameBuffers& frame,
+  FilteredCompanions filteredCompanions(int number, const FilterWeights& weights,
+                                        const CompanionMaker& make, bool accumulate);
+  // The companions' accumulated renders (of filteredCompanions) denoised again
+  // (guided by the frame `given`, else as the window holds it), each kept as
+  // the companion's history for the later frames, with those of the
+  // companions that have a render but were not accumulated.
+  std::map<std::string, Image> companionHistories(int number, const FrameBuffers* given,
                                                   const FilteredCompanions& passes,
                                                   const CompanionMaker& make);
   // A companion's history averaged with the past frames' (historyWeights).

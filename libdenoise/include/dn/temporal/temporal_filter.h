@@ -58,8 +58,8 @@ struct WindowMotion {
 
 // One frame of the window: the denoised result, the noisy render (for the
 // noise level, the light and the repeated-noise tests), its guides and motion.
-// A sequence holds them in half floats where it can (Sequence); the result of
-// the frame filtered stays in floats.
+// A sequence holds them in half floats where it can (Sequence); the filtered
+// result is in floats.
 struct WindowFrame {
   WindowImage denoised;  // 3 channels, linear
   WindowImage noisy;     // 3 channels, linear

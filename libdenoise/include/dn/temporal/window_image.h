@@ -1,6 +1,7 @@
-// An image of a sequence's window, in floats or packed in half floats (IEEE
-// binary16). The window holds nine frames; packed, a 1080p frame's noisy
-// render, albedo, past result and history take half the memory.
+// An image of a sequence's window, in floats, packed in half floats (IEEE
+// binary16), or as the one value of all its pixels (an alpha of ones). The
+// window holds nine frames; packed, a 1080p frame's noisy render, albedo,
+// result and history take half the memory.
 #pragma once
 
 #include <cstdint>
@@ -15,18 +16,18 @@ class WindowImage {
   WindowImage() = default;
   WindowImage(Image image) : floats_(std::move(image)) {}  // held in floats, as given
 
-  // Packs into half floats where that changes no value (a half-float file's
-  // render and guides, so the frame's buffers come back bit for bit); else
-  // keeps the floats.
+  // Packs where that changes no value: an image of one value into it, else
+  // into half floats where each value is one (a half-float file's render and
+  // guides, so the frame's buffers come back bit for bit); else keeps the floats.
   void packIfExact();
-  // Packs into half floats rounded to the nearest, after a power-of-two scale
-  // that brings the largest magnitude to the top of half's range: 11
-  // significant bits for every value down to 2^-28 of the largest. Keeps the
-  // floats where a value is not finite.
+  // The same, and else packs into half floats rounded to the nearest, after a
+  // power-of-two scale that brings the largest magnitude to the top of half's
+  // range: 11 significant bits for every value down to 2^-28 of the largest.
+  // Keeps the floats where a value is not finite.
   void pack();
 
-  bool packed() const { return !halves_.empty(); }
-  bool empty() const { return floats_.empty() && halves_.empty(); }
+  bool packed() const { return !halves_.empty() || constant_; }
+  bool empty() const { return floats_.empty() && !packed(); }
   int width() const { return floats_.width; }
   int height() const { return floats_.height; }
   int channels() const { return floats_.channels; }
@@ -46,6 +47,10 @@ class WindowImage {
   Image floats_;                       // the image; packed, its shape with no pixels
   std::vector<std::uint16_t> halves_;  // packed: the values times 2^exponent_
   int exponent_ = 0;
+  bool constant_ = false;  // packed as the value of every pixel, `value_`
+  float value_ = 0.0f;
+  // Packs into `value_` where every value has the same bits.
+  bool packIfConstant();
 };
 
 // IEEE binary16 conversions, on F16C where the processor has it (the same
