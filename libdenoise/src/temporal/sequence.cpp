@@ -111,17 +111,23 @@ motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
   return g;
 }
 
-// The frame with its colour replaced by the accumulated render, and its
-// albedo and normal by the prefilter's where its first denoising cleaned them.
-FrameBuffers withHistory(FrameBuffers out, Image history, const WindowImage& cleanAlbedo,
-                         const WindowImage& cleanNormal) {
-  out.buffers["color"] = std::move(history);
+// The frame with its albedo and normal replaced by the prefilter's where its
+// first denoising cleaned them.
+FrameBuffers withCleanedGuides(FrameBuffers out, const WindowImage& cleanAlbedo,
+                               const WindowImage& cleanNormal) {
   if (!cleanAlbedo.empty() && !cleanNormal.empty()) {
     out.buffers["albedo"] = cleanAlbedo.toImage();
     out.buffers["normal"] = cleanNormal.toImage();
     out.auxPrefiltered = true;
   }
   return out;
+}
+
+// The same, its colour replaced by the accumulated render.
+FrameBuffers withHistory(FrameBuffers out, Image history, const WindowImage& cleanAlbedo,
+                         const WindowImage& cleanNormal) {
+  out.buffers["color"] = std::move(history);
+  return withCleanedGuides(std::move(out), cleanAlbedo, cleanNormal);
 }
 
 // "WxH".
@@ -493,10 +499,8 @@ std::map<std::string, Image> Sequence::companionHistories(int number, const Fram
   Input& input = *inputs_.at(number);
   std::map<std::string, Image> again;
   if (!passes.accumulated.empty()) {
-    FrameBuffers frame = given ? *given : input.readAgain();
-    Image color = frame.get("color");
     const FrameBuffers guides =
-        withHistory(std::move(frame), std::move(color), input.cleanAlbedo, input.cleanNormal);
+        withCleanedGuides(given ? *given : input.readAgain(), input.cleanAlbedo, input.cleanNormal);
     again = make.denoiseAccumulated(guides, passes.accumulated);
   }
   // Where nothing was accumulated the history is the companion itself, as
