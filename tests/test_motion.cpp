@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -363,6 +364,44 @@ TEST_CASE("images resampled together are their channels stacked, bit for bit") {
   CHECK(resample(plan, smooth).at(2, y, 0) == together[0].at(2, y, 0));
 }
 
+TEST_CASE("colour images resampled alone or in pairs are as the general path, bit for bit") {
+  // A smooth image and one stepping up from black, where Catmull-Rom
+  // overshoots below 0 and both fall back to bilinear; a channel of ones
+  // sends the same images down the general path without changing that choice.
+  const int w = 32, h = 12;
+  Image smooth(w, h, 3), dark(w, h, 3), ones(w, h, 1, 1.0f), stacked(w, h, 6), darkAndOne(w, h, 4);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) {
+        smooth.at(x, y, c) = 1.0f + 0.3f * std::sin(0.4f * x + c + y);
+        dark.at(x, y, c) = x < w / 2 ? 0.0f : 1.0f + c + 0.1f * y;
+        stacked.at(x, y, c) = smooth.at(x, y, c), stacked.at(x, y, 3 + c) = dark.at(x, y, c);
+        darkAndOne.at(x, y, c) = dark.at(x, y, c);
+      }
+  Image positions(w, h, 2);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) positions.at(x, y, 0) = x + 0.3f, positions.at(x, y, 1) = y + 0.6f;
+  const Guides g = guides(makeFrame(w, h, 0, 0));
+  const Resampling plan = planResampling(g, positions, g);
+  auto sameBits = [](const Image& a, const Image& b, int channels, int first) {
+    for (std::size_t i = 0; i < a.pixelCount(); ++i)
+      for (int c = 0; c < a.channels; ++c)
+        if (std::memcmp(&a.pixels[i * a.channels + c], &b.pixels[i * channels + first + c],
+                        sizeof(float)) != 0)
+          return false;
+    return true;
+  };
+  const std::vector<Image> pair = resample(plan, {&smooth, &dark});
+  const Image general = resample(plan, stacked);
+  CHECK(sameBits(pair[0], general, 6, 0));
+  CHECK(sameBits(pair[1], general, 6, 3));
+  const Image alone = resample(plan, dark);
+  CHECK(sameBits(alone, resample(plan, {&dark, &ones})[0], 3, 0));
+  CHECK(sameBits(alone, resample(plan, darkAndOne), 4, 0));
+  // Beside the step Catmull-Rom would go below 0; bilinear gives the black.
+  CHECK(alone.at(w / 2 - 2, h / 2, 0) == 0.0f);
+}
+
 TEST_CASE("nearest-pixel reprojection rounds halves away from zero and clamps to the frame") {
   const int w = 7, h = 5;
   Image source(w, h, 1);
@@ -383,7 +422,12 @@ TEST_CASE("nearest-pixel reprojection rounds halves away from zero and clamps to
     };
     CAPTURE(xs[i]);
     CHECK(moved.pixels[i] == source.at(index(xs[i], w), index(xs[i] / 2, h), 0));
+    CHECK(nearestPixels(positions, w, h)[i] == static_cast<std::int32_t>(moved.pixels[i]));
   }
+  // A lost pixel has no source (reprojectNearest writes 0 there).
+  positions.pixels[2] = std::numeric_limits<float>::quiet_NaN();
+  CHECK(nearestPixels(positions, w, h)[1] == -1);
+  CHECK(reprojectNearest(source, positions).pixels[1] == 0.0f);
 }
 
 namespace {
@@ -479,6 +523,14 @@ TEST_CASE("chain positions along a chain equal each prefix's, bit for bit") {
       CHECK(std::memcmp(along[k].pixels.data(), alone.pixels.data(),
                         alone.pixels.size() * sizeof(float)) == 0);
     }
+    // Made in bands of rows (as threads share them out), the same bits.
+    std::vector<Image> banded(3, Image(64, 48, 2, -1.0f));
+    const int rows[] = {0, 17, 30, 48};
+    for (int b = 0; b < 3; ++b)
+      chainPositionsRows(chain, forward, {}, rows[b], rows[b + 1], banded);
+    for (std::size_t k = 0; k < along.size(); ++k)
+      CHECK(std::memcmp(along[k].pixels.data(), banded[k].pixels.data(),
+                        along[k].pixels.size() * sizeof(float)) == 0);
     const auto lost = std::count_if(along.back().pixels.begin(), along.back().pixels.end(),
                                     [](float v) { return std::isnan(v); });
     CHECK(lost > 0);

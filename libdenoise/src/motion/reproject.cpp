@@ -168,8 +168,37 @@ bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Targe
 // source's channels at its own pointer), whose taps cubicTapsMatch allowed;
 // false, with `out` untouched, where a value of any would be negative (an
 // overshoot at a dark edge) or they hold more than 8 channels together.
+// cubicSample of `Count` images of 3 channels (a result, and its history),
+// as cubicSample sums them but with the sums held in registers: the same bits.
+template <int Count>
+bool cubicSampleRgb(const std::vector<const Image*>& sources, float qx, float qy,
+                    const std::vector<float*>& out) {
+  const int width = sources.front()->width;
+  const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
+  const auto wx = catmullRom(qx - (x0 + 1)), wy = catmullRom(qy - (y0 + 1));
+  std::array<const float*, Count> from;
+  for (int k = 0; k < Count; ++k) from[k] = sources[k]->pixels.data();
+  double sum[3 * Count] = {};
+  for (int j = 0; j < 4; ++j)
+    for (int i = 0; i < 4; ++i) {
+      const std::size_t tap = 3 * (static_cast<std::size_t>(y0 + j) * width + x0 + i);
+      const double w = wx[i] * wy[j];
+      for (int k = 0; k < Count; ++k)
+        for (int c = 0; c < 3; ++c) sum[3 * k + c] += w * from[k][tap + c];
+    }
+  for (double v : sum)
+    if (v < 0.0) return false;
+  for (int k = 0; k < Count; ++k)
+    for (int c = 0; c < 3; ++c) out[k][c] = static_cast<float>(sum[3 * k + c]);
+  return true;
+}
+
 bool cubicSample(const std::vector<const Image*>& sources, float qx, float qy,
                  const std::vector<float*>& out) {
+  const bool rgb = std::all_of(sources.begin(), sources.end(),
+                               [](const Image* source) { return source->channels == 3; });
+  if (rgb && sources.size() == 1) return cubicSampleRgb<1>(sources, qx, qy, out);
+  if (rgb && sources.size() == 2) return cubicSampleRgb<2>(sources, qx, qy, out);
   const int width = sources.front()->width;
   const int x0 = static_cast<int>(std::floor(qx)) - 1, y0 = static_cast<int>(std::floor(qy)) - 1;
   int channels = 0;
@@ -230,23 +259,39 @@ std::vector<Image> chainPositionsAlong(const std::vector<FrameGeometry>& chain, 
                                        const TrustOptions& options) {
   if (chain.size() < 2) throw std::invalid_argument("chainPositions: needs two frames or more");
   const int width = chain.front().motion->width(), height = chain.front().motion->height();
+  std::vector<Image> positions(chain.size() - 1, Image(width, height, 2));
+  chainPositionsRows(chain, forward, options, 0, height, positions);
+  return positions;
+}
+
+void chainPositionsRows(const std::vector<FrameGeometry>& chain, bool forward,
+                        const TrustOptions& options, int rowBegin, int rowEnd,
+                        std::vector<Image>& positions) {
+  if (chain.size() < 2) throw std::invalid_argument("chainPositions: needs two frames or more");
+  const int width = chain.front().motion->width(), height = chain.front().motion->height();
   for (const auto& frame : chain)
     if (!frame.motion || frame.motion->empty() || frame.motion->width() != width ||
         frame.motion->height() != height)
       throw std::invalid_argument("chainPositions: every frame needs motion of the same size");
-  std::vector<Image> positions(chain.size() - 1, Image(width, height, 2));
-  for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
-      float qx = static_cast<float>(x), qy = static_cast<float>(y);
-      for (std::size_t hop = 0; hop + 1 < chain.size(); ++hop) {
+  if (positions.size() != chain.size() - 1)
+    throw std::invalid_argument("chainPositions: one image of positions a hop");
+  for (const Image& p : positions)
+    if (p.width != width || p.height != height || p.channels != 2)
+      throw std::invalid_argument("chainPositions: positions differ from the motion in size");
+  // Hop after hop over the rows, each from the positions the hop before
+  // reached: a few images are read at a time, not all of the chain's.
+  for (std::size_t hop = 0; hop + 1 < chain.size(); ++hop) {
+    const Image& there = forward ? chain[hop].motion->toNext : chain[hop].motion->toPrevious;
+    // The neighbour's own motion back must return here: where it does not,
+    // the neighbour shows something else at that place (an occluder).
+    const Image& back = forward ? chain[hop + 1].motion->toPrevious : chain[hop + 1].motion->toNext;
+    for (int y = rowBegin; y < rowEnd; ++y)
+      for (int x = 0; x < width; ++x) {
+        float qx = static_cast<float>(x), qy = static_cast<float>(y);
+        if (hop > 0) qx = positions[hop - 1].at(x, y, 0), qy = positions[hop - 1].at(x, y, 1);
         if (!std::isnan(qx)) {
-          const Image& there = forward ? chain[hop].motion->toNext : chain[hop].motion->toPrevious;
           const float* off = there.pixel(nearest(qx, width), nearest(qy, height));
           const float nx = qx + off[0], ny = qy + off[1];
-          // The neighbour's own motion back must return here: where it does
-          // not, the neighbour shows something else at that place (an occluder).
-          const Image& back =
-              forward ? chain[hop + 1].motion->toPrevious : chain[hop + 1].motion->toNext;
           const float* ret = onScreen(nx, ny, width, height)
                                  ? back.pixel(nearest(nx, width), nearest(ny, height))
                                  : nullptr;
@@ -259,8 +304,7 @@ std::vector<Image> chainPositionsAlong(const std::vector<FrameGeometry>& chain, 
         positions[hop].at(x, y, 0) = qx;
         positions[hop].at(x, y, 1) = qy;
       }
-    }
-  return positions;
+  }
 }
 
 Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
@@ -381,6 +425,16 @@ void reprojectNearestRows(const Image& source, const Image& positions, int rowBe
       const float* from = source.pixel(nearest(qx, source.width), nearest(qy, source.height));
       std::copy(from, from + source.channels, to);
     }
+}
+
+std::vector<std::int32_t> nearestPixels(const Image& positions, int width, int height) {
+  std::vector<std::int32_t> out(positions.pixelCount(), -1);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const float qx = positions.pixels[2 * i], qy = positions.pixels[2 * i + 1];
+    if (!std::isnan(qx) && !std::isnan(qy))
+      out[i] = nearest(qy, height) * width + nearest(qx, width);
+  }
+  return out;
 }
 
 }  // namespace dn::motion

@@ -4,6 +4,7 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <optional>
 #include <set>
 #include <stdexcept>
@@ -251,10 +252,15 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
   // A given frame is denoised straight from the caller's buffers.
   if (!given) entry->buffers = read(path, extraChannels(path));
   const FrameBuffers& frame = given ? *given : entry->buffers;
+  // The view-dependent share is made on a thread of its own while the guides
+  // and motion are taken.
+  std::future<Image> viewDependent;
+  if (settings_.viewDependentShare)
+    viewDependent =
+        std::async(settings_.filter.threads > 1 ? std::launch::async : std::launch::deferred,
+                   [&] { return settings_.viewDependentShare(path, frame); });
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = guidesOf(frame, path, settings_.read);
-  if (settings_.viewDependentShare)
-    entry->frame.viewDependent = settings_.viewDependentShare(path, frame);
   if (auto field = motionOf(number, path, frame)) {
     entry->frame.motion = std::move(*field);
     entry->frame.motion.toPrevious.pack();
@@ -268,6 +274,7 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
       entry->heldInWindow.insert(name);
     copies[k]->packIfExact();
   }
+  if (viewDependent.valid()) entry->frame.viewDependent = viewDependent.get();
   entry->frame.viewDependent.pack();
   if (given) {  // kept for Sequence::frame, but for what the window holds
     entry->buffers = *given;

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <exception>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 
@@ -51,18 +53,22 @@ void forBands(std::size_t count, int threads,
 // result: differences then weigh as they show, in dark and bright frames alike.
 // (Not the mean: a visible sun can hold most of a frame's mean, and darken
 // everything else to nothing.)
+float tonemappedValue(float v, double scale) {
+  const double s = std::max(0.0, double(v) * scale);           // NaN: 0
+  return s < 1e30 ? static_cast<float>(s / (1.0 + s)) : 1.0f;  // an infinite firefly: 1
+}
+
 Image tonemapped(const Image& linear, double scale) {
-  Image out = linear;
-  for (float& v : out.pixels) {
-    const double s = std::max(0.0, double(v) * scale);        // NaN: 0
-    v = s < 1e30 ? static_cast<float>(s / (1.0 + s)) : 1.0f;  // an infinite firefly: 1
-  }
+  Image out(linear.width, linear.height, linear.channels);
+  std::transform(linear.pixels.begin(), linear.pixels.end(), out.pixels.begin(),
+                 [scale](float v) { return tonemappedValue(v, scale); });
   return out;
 }
 
 Image difference(const Image& a, const Image& b) {
-  Image out = a;
-  for (std::size_t i = 0; i < out.pixels.size(); ++i) out.pixels[i] -= b.pixels[i];
+  Image out(a.width, a.height, a.channels);
+  std::transform(a.pixels.begin(), a.pixels.end(), b.pixels.begin(), out.pixels.begin(),
+                 std::minus<float>());
   return out;
 }
 
@@ -87,6 +93,20 @@ std::vector<float> absoluteDifference(const Image& a, const Image& b) {
     for (int c = 0; c < a.channels; ++c)
       s += std::abs(a.pixels[i * a.channels + c] - b.pixels[i * b.channels + c]);
     d[i] = static_cast<float>(s / a.channels);
+  }
+  return d;
+}
+
+// absoluteDifference(tonemapped(linear, scale), mapped), without the tonemapped image.
+std::vector<float> mappedDifference(const Image& linear, double scale, const Image& mapped) {
+  std::vector<float> d(linear.pixelCount());
+  const int channels = linear.channels;
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    double s = 0.0;
+    for (int c = 0; c < channels; ++c)
+      s += std::abs(tonemappedValue(linear.pixels[i * channels + c], scale) -
+                    mapped.pixels[i * channels + c]);
+    d[i] = static_cast<float>(s / channels);
   }
   return d;
 }
@@ -362,6 +382,32 @@ Image scaled(Image image, const Image& factor) {
   return image;
 }
 
+// A neighbour's noisy render, tonemapped, and its noise as the denoiser saw it
+// (the render less its result, both tonemapped), each brought into the frame
+// at the nearest pixel, so that its noise stays independent; zeros where lost.
+struct NearestRender {
+  Image mapped;
+  Image residual;
+};
+
+NearestRender nearestRender(const Image& noisy, const Image& denoised, const Image& positions,
+                            double scale) {
+  const int channels = noisy.channels;
+  NearestRender out{Image(positions.width, positions.height, channels),
+                    Image(positions.width, positions.height, channels)};
+  const std::vector<std::int32_t> from =
+      motion::nearestPixels(positions, noisy.width, noisy.height);
+  for (std::size_t i = 0; i < from.size(); ++i) {
+    if (from[i] < 0) continue;
+    for (int c = 0; c < channels; ++c) {
+      const std::size_t s = std::size_t(from[i]) * channels + c, d = i * channels + c;
+      out.mapped.pixels[d] = tonemappedValue(noisy.pixels[s], scale);
+      out.residual.pixels[d] = out.mapped.pixels[d] - tonemappedValue(denoised.pixels[s], scale);
+    }
+  }
+  return out;
+}
+
 // What the centre frame holds for the tests, computed once per frame.
 struct Centre {
   explicit Centre(const WindowFrame& frame);
@@ -424,7 +470,7 @@ struct Contribution {
 
 // Per pixel, |tonemapped `image` - the frame's result|, in local noise levels.
 std::vector<float> normalisedDifference(const Centre& centre, const Image& image) {
-  std::vector<float> d = absoluteDifference(tonemapped(image, centre.scale), centre.mapped);
+  std::vector<float> d = mappedDifference(image, centre.scale, centre.mapped);
   for (std::size_t i = 0; i < d.size(); ++i) d[i] /= centre.noise[i];
   return d;
 }
@@ -459,17 +505,15 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
     moved = motion::resample(plan, denoised);
   }
   const Image& trust = plan.trust;
-  const Image neighbourNoisy = tonemapped(neighbour.noisy.floats(noisyScratch), centre.scale);
-  const Image residual = motion::reprojectNearest(
-      difference(neighbourNoisy, tonemapped(denoised, centre.scale)), positions);
-  if (correlation(centre.residual, residual, trust) > options.repeatedNoiseCorrelation) {
+  const NearestRender render =
+      nearestRender(neighbour.noisy.floats(noisyScratch), denoised, positions, centre.scale);
+  if (correlation(centre.residual, render.residual, trust) > options.repeatedNoiseCorrelation) {
     out.verdict = Contribution::Verdict::RepeatedNoise;
     return out;
   }
   out.image = std::move(moved);
-  std::vector<float> light =
-      lightChange(centre.noisyMapped, motion::reprojectNearest(neighbourNoisy, positions), trust,
-                  centre.residual, residual, options.lightBox);
+  std::vector<float> light = lightChange(centre.noisyMapped, render.mapped, trust, centre.residual,
+                                         render.residual, options.lightBox);
   double fullSpread = robustSpread(normalisedDifference(centre, out.image), trust);
   Image relitTrust;  // relit: where its factor is defined
   // Where the light changed over most of the frame (a moving lamp, the sun),
@@ -580,8 +624,7 @@ Image colourReference(const Image& own, const std::vector<Contribution>& contrib
 void applyColourTest(Contribution& k, const Image& referenceMapped, const Centre& centre,
                      const TemporalOptions& options) {
   if (k.spread <= 0.0) return;
-  const std::vector<float> d =
-      absoluteDifference(tonemapped(k.image, centre.scale), referenceMapped);
+  const std::vector<float> d = mappedDifference(k.image, centre.scale, referenceMapped);
   for (std::size_t i = 0; i < d.size(); ++i) {
     if (k.weight[i] <= 0.0) continue;
     const double z = d[i] / centre.noise[i] / k.spread;
@@ -794,18 +837,44 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     }
     chains.push_back(std::move(chain));
   }
-  forEach(chains.size(), options.threads, [&](std::size_t side) {
-    if (chains[side].size() < 2) return;
-    std::vector<motion::MotionField> fields;  // in floats while the chain is followed
-    for (const WindowMotion* m : chains[side]) fields.push_back(m->toField());
-    std::vector<motion::FrameGeometry> chain;
-    for (const motion::MotionField& field : fields) chain.push_back({nullptr, &field});
-    std::vector<Image> along = motion::chainPositionsAlong(chain, side == 1, options.trust);
-    const std::size_t first = side == 0 ? 0 : chains[0].size() - 1;
-    for (std::size_t k = 0; k < along.size(); ++k)
-      neighbours[first + k].positions = std::move(along[k]);
+  // Each side's motion in floats while it is followed; the centre's own
+  // tests' images made meanwhile, a task of their own.
+  std::vector<std::vector<motion::MotionField>> fields(chains.size());
+  std::vector<std::pair<std::size_t, std::size_t>> conversions;  // (side, frame)
+  for (std::size_t side = 0; side < chains.size(); ++side) {
+    if (chains[side].size() < 2) continue;
+    fields[side].resize(chains[side].size());
+    for (std::size_t k = 0; k < chains[side].size(); ++k) conversions.emplace_back(side, k);
+  }
+  std::optional<Centre> centreImages;
+  forEach(conversions.size() + 1, options.threads, [&](std::size_t task) {
+    if (task == 0) return void(centreImages.emplace(current));
+    const auto [side, k] = conversions[task - 1];
+    fields[side][k] = chains[side][k]->toField();
   });
-  Centre c(current);
+  // Then each side's chain, over bands of rows.
+  const int width = current.denoised.width(), height = current.denoised.height();
+  const std::size_t bands = std::max(1, options.threads);
+  std::vector<std::vector<motion::FrameGeometry>> geometry(chains.size());
+  std::vector<std::vector<Image>> along(chains.size());
+  for (std::size_t side = 0; side < chains.size(); ++side) {
+    for (const motion::MotionField& field : fields[side])
+      geometry[side].push_back({nullptr, &field});
+    if (!fields[side].empty()) along[side].assign(fields[side].size() - 1, Image(width, height, 2));
+  }
+  forEach(chains.size() * bands, options.threads, [&](std::size_t task) {
+    const std::size_t side = task / bands, band = task % bands;
+    if (along[side].empty()) return;
+    motion::chainPositionsRows(geometry[side], side == 1, options.trust,
+                               static_cast<int>(band * height / bands),
+                               static_cast<int>((band + 1) * height / bands), along[side]);
+  });
+  for (std::size_t side = 0; side < chains.size(); ++side) {
+    const std::size_t first = side == 0 ? 0 : chains[0].size() - 1;
+    for (std::size_t k = 0; k < along[side].size(); ++k)
+      neighbours[first + k].positions = std::move(along[side][k]);
+  }
+  Centre& c = *centreImages;
   std::vector<Contribution> contributions(neighbours.size());
   forEach(neighbours.size(), options.threads, [&](std::size_t n) {
     Neighbour& nb = neighbours[n];
@@ -966,8 +1035,7 @@ std::vector<std::vector<double>> historyTrust(const Image& own, const TemporalRe
   std::vector<std::vector<double>> weights = past.weights;
   const Image ownMapped = tonemapped(own, past.scale);
   for (std::size_t k = 0; k < weights.size(); ++k) {
-    const std::vector<float> d =
-        absoluteDifference(tonemapped(past.images[k], past.scale), ownMapped);
+    const std::vector<float> d = mappedDifference(past.images[k], past.scale, ownMapped);
     for (std::size_t i = 0; i < d.size(); ++i) {
       const double error = past.noise[i] * std::sqrt(2.0 / result.historyFrames.pixels[i]);
       weights[k][i] *= std::clamp(

@@ -2,6 +2,7 @@
 // and deciding per pixel whether what arrives can be trusted.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "dn/image.h"
@@ -63,6 +64,12 @@ Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
 // it: element k is chainPositions of chain[0 .. k + 1], bit for bit.
 std::vector<Image> chainPositionsAlong(const std::vector<FrameGeometry>& chain, bool forward,
                                        const TrustOptions& options = {});
+// The same into rows [rowBegin, rowEnd) of `positions` (chain.size() - 1
+// images of 2 channels, the frames' size), the other rows untouched: for
+// callers that split the rows among threads.
+void chainPositionsRows(const std::vector<FrameGeometry>& chain, bool forward,
+                        const TrustOptions& options, int rowBegin, int rowEnd,
+                        std::vector<Image>& positions);
 
 // A neighbour's image resampled at `positions` (bilinear over the taps whose
 // guides match the current frame's around the destination pixel; Catmull-Rom
@@ -105,6 +112,10 @@ Image reprojectNearest(const Image& source, const Image& positions);
 // channels), the other rows untouched: for callers that split the rows among threads.
 void reprojectNearestRows(const Image& source, const Image& positions, int rowBegin, int rowEnd,
                           Image& out);
+// Per pixel of `positions`, the index of the pixel of a width x height image
+// that reprojectNearest takes, or -1 where positions are NaN: for callers that
+// bring in several images, or values made from them, at the nearest pixel.
+std::vector<std::int32_t> nearestPixels(const Image& positions, int width, int height);
 
 // Whether `pixel` shows no surface, only the environment: a depth guide of 0
 // (Cycles' Denoising Depth, Mitsuba's) or beyond 1e9 (Cycles' Z pass writes
