@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -348,6 +349,61 @@ TEST_CASE("kept layers are written as stored: half and float channels bit for bi
         output, 0, {"ViewLayer.Denoised.R", "ViewLayer.Denoised.G", "ViewLayer.Denoised.B"});
     for (std::size_t i = 0; i < result.pixels.size(); ++i)
       CHECK(denoised.pixels[i] == float(half(result.pixels[i])));
+  }
+}
+
+TEST_CASE(
+    "channel groups read into a wider window are as OpenImageIO reads them, scanlines or tiles") {
+  TempDir dir;
+  const float zero = 0.0f;
+  const int w = 7, h = 5;
+  OIIO::ImageSpec spec(w, h, 5, OIIO::TypeDesc::HALF);
+  spec.x = 3, spec.y = -2;  // a data window off the origin
+  spec.channelnames = {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B",
+                       "ViewLayer.Depth.Z", "ViewLayer.Vector.X"};
+  spec.channelformats = {OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF,
+                         OIIO::TypeDesc::FLOAT, OIIO::TypeDesc::FLOAT};
+  std::vector<float> pixels(w * h * spec.nchannels);
+  for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = 1e4f * std::sin(0.37f * i) + 1e-3f;
+  for (const bool tiled : {false, true}) {
+    CAPTURE(tiled);
+    if (tiled) spec.tile_width = spec.tile_height = 4;
+    const std::string path = dir / (tiled ? "tiled.exr" : "scanlines.exr");
+    {
+      auto out = OIIO::ImageOutput::create(path);
+      REQUIRE(out);
+      REQUIRE(out->open(path, spec));
+      REQUIRE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
+      REQUIRE(out->close());
+    }
+    // Channels out of the file's order, in a window one row and column wider each way.
+    const PixelWindow window{spec.x - 1, spec.y - 1, w + 2, h + 2};
+    const std::vector<Image> read = readImages(
+        path, {{"ViewLayer.Vector.X", "ViewLayer.Combined.G"}, {"ViewLayer.Depth.Z"}}, window);
+    auto reference = [&](const std::string& name) {  // OpenImageIO's own read of one channel
+      auto in = OIIO::ImageInput::open(path);
+      REQUIRE(in);
+      const int c = in->spec().channelindex(name);
+      std::vector<float> values(w * h);
+      REQUIRE(in->read_image(0, 0, c, c + 1, OIIO::TypeDesc::FLOAT, values.data()));
+      return values;
+    };
+    const std::vector<std::pair<const float*, int>> wanted = {
+        {&read[0].pixels[0], 2}, {&read[0].pixels[1], 2}, {&read[1].pixels[0], 1}};
+    const std::vector<std::string> names = {"ViewLayer.Vector.X", "ViewLayer.Combined.G",
+                                            "ViewLayer.Depth.Z"};
+    for (std::size_t k = 0; k < names.size(); ++k) {
+      CAPTURE(names[k]);
+      const std::vector<float> expected = reference(names[k]);
+      const auto [first, stride] = wanted[k];
+      for (int y = 0; y < window.height; ++y)
+        for (int x = 0; x < window.width; ++x) {
+          const int fx = x - 1, fy = y - 1;  // in the data window
+          const bool inside = fx >= 0 && fy >= 0 && fx < w && fy < h;
+          const float value = first[(std::size_t(y) * window.width + x) * stride];
+          CHECK(std::memcmp(&value, inside ? &expected[fy * w + fx] : &zero, sizeof value) == 0);
+        }
+    }
   }
 }
 

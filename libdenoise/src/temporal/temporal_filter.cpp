@@ -806,6 +806,44 @@ FilterWeights weightsOf(std::vector<Contribution> contributions,
   return out;
 }
 
+// Per side of `chains` (the past, then the future, each from the centre
+// frame out), where each pixel of the centre frame is in each frame after the
+// first (chainPositionsAlong): the motion in floats while it is followed,
+// over bands of rows on the options' threads. `meanwhile` runs beside the
+// motion's conversion, a task of its own.
+std::vector<std::vector<Image>> followChains(
+    const std::vector<std::vector<const WindowMotion*>>& chains, int width, int height,
+    const TemporalOptions& options, const std::function<void()>& meanwhile) {
+  std::vector<std::vector<motion::MotionField>> fields(chains.size());
+  std::vector<std::pair<std::size_t, std::size_t>> conversions;  // (side, frame)
+  for (std::size_t side = 0; side < chains.size(); ++side) {
+    if (chains[side].size() < 2) continue;
+    fields[side].resize(chains[side].size());
+    for (std::size_t k = 0; k < chains[side].size(); ++k) conversions.emplace_back(side, k);
+  }
+  forEach(conversions.size() + 1, options.threads, [&](std::size_t task) {
+    if (task == 0) return meanwhile();
+    const auto [side, k] = conversions[task - 1];
+    fields[side][k] = chains[side][k]->toField();
+  });
+  const std::size_t bands = std::max(1, options.threads);
+  std::vector<std::vector<motion::FrameGeometry>> geometry(chains.size());
+  std::vector<std::vector<Image>> along(chains.size());
+  for (std::size_t side = 0; side < chains.size(); ++side) {
+    for (const motion::MotionField& field : fields[side])
+      geometry[side].push_back({nullptr, &field});
+    if (!fields[side].empty()) along[side].assign(fields[side].size() - 1, Image(width, height, 2));
+  }
+  forEach(chains.size() * bands, options.threads, [&](std::size_t task) {
+    const std::size_t side = task / bands, band = task % bands;
+    if (along[side].empty()) return;
+    motion::chainPositionsRows(geometry[side], side == 1, options.trust,
+                               static_cast<int>(band * height / bands),
+                               static_cast<int>((band + 1) * height / bands), along[side]);
+  });
+  return along;
+}
+
 }  // namespace
 
 TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::size_t centre,
@@ -817,7 +855,7 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
       current.viewDependent.pixelCount() != current.denoised.pixelCount())
     throw std::invalid_argument("filterFrame: the view-dependent share differs in size");
   // The neighbours in order (the past nearest first, then the future); a gap
-  // ends a side. Each side's motion is followed along the frames in one pass.
+  // ends a side. Each side's motion is followed along its frames at once.
   struct Neighbour {
     const WindowFrame* frame;
     std::size_t index;  // in the window
@@ -837,38 +875,11 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
     }
     chains.push_back(std::move(chain));
   }
-  // Each side's motion in floats while it is followed; the centre's own
-  // tests' images made meanwhile, a task of their own.
-  std::vector<std::vector<motion::MotionField>> fields(chains.size());
-  std::vector<std::pair<std::size_t, std::size_t>> conversions;  // (side, frame)
-  for (std::size_t side = 0; side < chains.size(); ++side) {
-    if (chains[side].size() < 2) continue;
-    fields[side].resize(chains[side].size());
-    for (std::size_t k = 0; k < chains[side].size(); ++k) conversions.emplace_back(side, k);
-  }
+  // The centre's own tests' images are made while the motion is converted.
   std::optional<Centre> centreImages;
-  forEach(conversions.size() + 1, options.threads, [&](std::size_t task) {
-    if (task == 0) return void(centreImages.emplace(current));
-    const auto [side, k] = conversions[task - 1];
-    fields[side][k] = chains[side][k]->toField();
-  });
-  // Then each side's chain, over bands of rows.
-  const int width = current.denoised.width(), height = current.denoised.height();
-  const std::size_t bands = std::max(1, options.threads);
-  std::vector<std::vector<motion::FrameGeometry>> geometry(chains.size());
-  std::vector<std::vector<Image>> along(chains.size());
-  for (std::size_t side = 0; side < chains.size(); ++side) {
-    for (const motion::MotionField& field : fields[side])
-      geometry[side].push_back({nullptr, &field});
-    if (!fields[side].empty()) along[side].assign(fields[side].size() - 1, Image(width, height, 2));
-  }
-  forEach(chains.size() * bands, options.threads, [&](std::size_t task) {
-    const std::size_t side = task / bands, band = task % bands;
-    if (along[side].empty()) return;
-    motion::chainPositionsRows(geometry[side], side == 1, options.trust,
-                               static_cast<int>(band * height / bands),
-                               static_cast<int>((band + 1) * height / bands), along[side]);
-  });
+  std::vector<std::vector<Image>> along =
+      followChains(chains, current.denoised.width(), current.denoised.height(), options,
+                   [&] { centreImages.emplace(current); });
   for (std::size_t side = 0; side < chains.size(); ++side) {
     const std::size_t first = side == 0 ? 0 : chains[0].size() - 1;
     for (std::size_t k = 0; k < along[side].size(); ++k)
