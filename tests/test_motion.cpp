@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <limits>
 #include <random>
+#include <stdexcept>
 
 #include "dn/io/buffer_io.h"
 #include "dn/motion/motion.h"
@@ -528,6 +529,7 @@ TEST_CASE("chain positions along a chain equal each prefix's, bit for bit") {
     const int rows[] = {0, 17, 30, 48};
     for (int b = 0; b < 3; ++b)
       chainPositionsRows(chain, forward, {}, rows[b], rows[b + 1], banded);
+    CHECK_THROWS_AS(chainPositionsRows(chain, forward, {}, 40, 49, banded), std::invalid_argument);
     for (std::size_t k = 0; k < along.size(); ++k)
       CHECK(std::memcmp(along[k].pixels.data(), banded[k].pixels.data(),
                         along[k].pixels.size() * sizeof(float)) == 0);

@@ -164,10 +164,6 @@ bool cubicTapsMatch(const Surface& sourceGuides, float qx, float qy, const Targe
   return true;
 }
 
-// The sources resampled at (qx, qy) by Catmull-Rom into `out` (each
-// source's channels at its own pointer), whose taps cubicTapsMatch allowed;
-// false, with `out` untouched, where a value of any would be negative (an
-// overshoot at a dark edge) or they hold more than 8 channels together.
 // cubicSample of `Count` images of 3 channels (a result, and its history),
 // as cubicSample sums them but with the sums held in registers: the same bits.
 template <int Count>
@@ -193,6 +189,10 @@ bool cubicSampleRgb(const std::vector<const Image*>& sources, float qx, float qy
   return true;
 }
 
+// The sources resampled at (qx, qy) by Catmull-Rom into `out` (each
+// source's channels at its own pointer), whose taps cubicTapsMatch allowed;
+// false, with `out` untouched, where a value of any would be negative (an
+// overshoot at a dark edge) or they hold more than 8 channels together.
 bool cubicSample(const std::vector<const Image*>& sources, float qx, float qy,
                  const std::vector<float*>& out) {
   const bool rgb = std::all_of(sources.begin(), sources.end(),
@@ -275,6 +275,8 @@ void chainPositionsRows(const std::vector<FrameGeometry>& chain, bool forward,
       throw std::invalid_argument("chainPositions: every frame needs motion of the same size");
   if (positions.size() != chain.size() - 1)
     throw std::invalid_argument("chainPositions: one image of positions a hop");
+  if (rowBegin < 0 || rowEnd > height || rowBegin > rowEnd)
+    throw std::invalid_argument("chainPositions: rows outside the frame");
   for (const Image& p : positions)
     if (p.width != width || p.height != height || p.channels != 2)
       throw std::invalid_argument("chainPositions: positions differ from the motion in size");
