@@ -93,9 +93,12 @@ int run(Options o, int argc, char** argv) {
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     const auto& [input, output] = jobs[j];
     const std::string name = input.empty() ? o.separateFiles.at("color") : input;
-    // A sequence's frame was read once already, as a neighbour, in the window.
-    FrameBuffers frame =
-        sequence ? sequence->frame(input, readFile) : readInput(o, denoiser, input, name);
+    // A sequence's frame is read once, into the window (as a neighbour, or
+    // as it is denoised), and put back together here only to be looked at.
+    const bool lookedAt = o.verbose || !ref.empty();
+    FrameBuffers frame = !sequence  ? readInput(o, denoiser, input, name)
+                         : lookedAt ? sequence->frame(input, readFile)
+                                    : FrameBuffers();
     if (!ref.empty()) checkReferenceSize(o, ref, frame, name);
     if (o.verbose) {
       for (const auto& note : frame.notes) fmt::print(stderr, "dndenoise: {}: {}\n", name, note);

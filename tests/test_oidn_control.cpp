@@ -320,3 +320,22 @@ TEST_CASE("on independent noise the Control Module leaves the base alone, unless
   CHECK_FALSE(alone.steered);
   CHECK_FALSE(alone.noiseLeft);
 }
+
+TEST_CASE("a frame whose noise is known is steered as it says, without measuring it again") {
+  // A sequence's accumulated render has its frame's noise (FrameBuffers::correlatedNoise).
+  const std::string models = std::string(DN_SOURCE_DIR) + "/models/";
+  const Denoiser controlled = Denoiser::fromFile(models + "oidn-control-diffusion.dnm");
+  DenoiseOptions options;
+  options.sigmas = std::vector<double>{};  // one pass is enough to tell
+  FrameBuffers splatted =
+      readFrame(std::string(DN_TESTDATA) + "/renderers/mitsuba_gauss_cornell_4spp.exr");
+  splatted.correlatedNoise = false;  // the gate would steer: told otherwise
+  const DenoiseResult base = controlled.denoise(splatted, options);
+  CHECK_FALSE(base.steered);
+  CHECK_FALSE(base.noiseLeft);
+  FrameBuffers independent = readFrame(std::string(DN_TESTDATA) + "/example/scene000201_4spp.exr");
+  independent.correlatedNoise = true;  // the gate would not
+  const DenoiseResult steered = controlled.denoise(independent, options);
+  CHECK(steered.steered);
+  CHECK_FALSE(steered.noiseLeft);
+}

@@ -186,6 +186,32 @@ TEST_CASE("a frame denoised from the window gives the same bits as from the call
   for (const auto& file : fromWindow.files) CHECK(fromWindow.decoded[file] == 1);
 }
 
+TEST_CASE(
+    "a frame's accumulated render is steered as the frame was, its noise not measured again") {
+  for (const bool steered : {false, true}) {
+    CAPTURE(steered);
+    CountedShot counted;
+    auto shot = counted.plan();
+    REQUIRE(shot);
+    int again = 0;
+    const Sequence::Denoise denoise = [&](const std::string& path, const FrameBuffers& frame) {
+      DenoiseResult result = asRenderedCleaned(path, frame);
+      result.color = blurred(result.color);
+      if (!frame.auxPrefiltered) {
+        CHECK_FALSE(frame.correlatedNoise);  // a frame as read: for the denoiser to measure
+        result.steered = steered;
+        return result;
+      }
+      ++again;
+      REQUIRE(frame.correlatedNoise);
+      CHECK(*frame.correlatedNoise == steered);
+      return result;
+    };
+    for (const auto& file : counted.files) shot->denoise(file, counted.read, denoise);
+    CHECK(again >= 4);
+  }
+}
+
 TEST_CASE("a neighbour's companions are made from the frame as read, each file decoded once") {
   CountedShot counted;
   auto shot = counted.plan();

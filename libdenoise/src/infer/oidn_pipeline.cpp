@@ -240,18 +240,20 @@ DenoiseResult OidnPipeline::denoise(const FrameBuffers& frame,
   const bool control = controlApplies(frame.names());
   // The Control Module's extra buffers are read when it steers (FrameBuffers::unread).
   const std::vector<std::string>& extras = info_.oidn.control.extra_buffers;
-  if (control && options.control == ControlUse::Always)
+  const bool gate = control && options.control == ControlUse::Auto;
+  if ((control && options.control == ControlUse::Always) ||
+      (gate && frame.correlatedNoise.value_or(false)))
     return denoiseWithControl(withUnread(frame, extras), options);
-  DenoiseResult result = denoiseWithBase(frame, options);
-  if (!control || options.control != ControlUse::Auto || !correlatedNoiseLeft(*result.noiseLeft))
-    return result;
+  // Where the frame's noise is known already, the gate's measure is not taken again.
+  DenoiseResult result = denoiseWithBase(frame, options, gate && !frame.correlatedNoise);
+  if (!result.noiseLeft || !correlatedNoiseLeft(*result.noiseLeft)) return result;
   DenoiseResult steered = denoiseWithControl(withUnread(frame, extras), options);
   steered.noiseLeft = result.noiseLeft;
   return steered;
 }
 
 DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
-                                            const DenoiseOptions& options) const {
+                                            const DenoiseOptions& options, bool gate) const {
   c10::InferenceMode inference;
   OidnRunOptions run;
   run.device = options.device;
@@ -260,7 +262,6 @@ DenoiseResult OidnPipeline::denoiseWithBase(const FrameBuffers& frame,
   setMemoryBudget(run, options);
   run.progress = options.progress;
   const bool onHost = options.device.is_cpu();
-  const bool gate = controlApplies(frame.names()) && options.control == ControlUse::Auto;
   FrameUploads uploads(frame, options.device);  // the gate reads what the networks sent
   if (!onHost && gate) run.uploads = &uploads;
   // Off the CPU the host waits for the device once, for the result (its host

@@ -314,14 +314,17 @@ Image chainPositions(const std::vector<FrameGeometry>& chain, bool forward,
   return std::move(chainPositionsAlong(chain, forward, options).back());
 }
 
-Resampling planResampling(const GuideImages& sourceGuides, const Image& positions,
+Resampling planResampling(const GuideImages& sourceGuides, Image positionsIn,
                           const GuideImages& currentGuides, const TrustOptions& options) {
-  const int width = positions.width, height = positions.height;
-  if (positions.channels != 2) throw std::invalid_argument("reproject: positions need 2 channels");
+  const int width = positionsIn.width, height = positionsIn.height;
+  if (positionsIn.channels != 2)
+    throw std::invalid_argument("reproject: positions need 2 channels");
   checkGuides(sourceGuides, width, height);
   checkGuides(currentGuides, width, height);
-  Resampling plan{positions, std::vector<unsigned char>(positions.pixelCount(), 0),
+  const std::size_t pixels = positionsIn.pixelCount();
+  Resampling plan{std::move(positionsIn), std::vector<unsigned char>(pixels, 0),
                   Image(width, height, 1)};
+  const Image& positions = plan.positions;
   const Surface source(sourceGuides), current(currentGuides);
   const GuideTests tests(source, current);
   for (int y = 0; y < height; ++y)

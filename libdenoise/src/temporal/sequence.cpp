@@ -124,10 +124,12 @@ FrameBuffers withCleanedGuides(FrameBuffers out, const WindowImage& cleanAlbedo,
   return out;
 }
 
-// The same, its colour replaced by the accumulated render.
-FrameBuffers withHistory(FrameBuffers out, Image history, const WindowImage& cleanAlbedo,
-                         const WindowImage& cleanNormal) {
+// The same, its colour replaced by the accumulated render, whose noise is
+// the frame's: steered as the frame's first denoising chose (`alone`).
+FrameBuffers withHistory(FrameBuffers out, Image history, const DenoiseResult& alone,
+                         const WindowImage& cleanAlbedo, const WindowImage& cleanNormal) {
   out.buffers["color"] = std::move(history);
+  out.correlatedNoise = alone.steered;
   return withCleanedGuides(std::move(out), cleanAlbedo, cleanNormal);
 }
 
@@ -400,12 +402,13 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers* given, TemporalR
                                 const Denoise& denoise) {
   Input& self = *inputs_.at(number);
   // Where no neighbour was trusted the history is the frame's own render.
-  Image history = filtered.stats.accumulatedFrames > 1.0
-                      ? denoise(fileOf(number), withHistory(given ? *given : self.readAgain(),
-                                                            std::move(filtered.history),
-                                                            self.cleanAlbedo, self.cleanNormal))
-                            .color
-                      : self.frame.denoised.toImage();
+  Image history =
+      filtered.stats.accumulatedFrames > 1.0
+          ? denoise(fileOf(number),
+                    withHistory(given ? *given : self.readAgain(), std::move(filtered.history),
+                                *estimates_.at(number), self.cleanAlbedo, self.cleanNormal))
+                .color
+          : self.frame.denoised.toImage();
   if (self.onDevice)
     self.onDevice->history = filtered.stats.accumulatedFrames > 1.0
                                  ? pixelsToDevice(history, *settings_.filterDevice)

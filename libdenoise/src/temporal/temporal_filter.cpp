@@ -487,8 +487,8 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
       std::any_of(still.pixels.begin(), still.pixels.end(), [](float w) { return w > 0.0f; });
   motion::Resampling plan = [&] {
     motion::Guides unpacked;  // those held in half floats, while planned
-    return motion::planResampling(neighbour.guides.view(unpacked), positions, centre.guides,
-                                  options.trust);
+    return motion::planResampling(neighbour.guides.view(unpacked), std::move(positions),
+                                  centre.guides, options.trust);
   }();
   Image denoisedScratch, noisyScratch;
   const Image& denoised = neighbour.denoised.floats(denoisedScratch);
@@ -506,7 +506,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
   }
   const Image& trust = plan.trust;
   const NearestRender render =
-      nearestRender(neighbour.noisy.floats(noisyScratch), denoised, positions, centre.scale);
+      nearestRender(neighbour.noisy.floats(noisyScratch), denoised, plan.positions, centre.scale);
   if (correlation(centre.residual, render.residual, trust) > options.repeatedNoiseCorrelation) {
     out.verdict = Contribution::Verdict::RepeatedNoise;
     return out;
@@ -757,13 +757,15 @@ void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowF
   }
   result.history = Image(own.width, own.height, 3);
   result.historyFrames = Image(own.width, own.height, 1);
-  double total = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int ch = 0; ch < 3; ++ch)
-      result.history.pixels[3 * i + ch] = static_cast<float>(sum[3 * i + ch] / weight[i]);
-    result.historyFrames.pixels[i] = static_cast<float>(weight[i] * weight[i] / squares[i]);
-    total += result.historyFrames.pixels[i];
-  }
+  forBands(n, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      for (int ch = 0; ch < 3; ++ch)
+        result.history.pixels[3 * i + ch] = static_cast<float>(sum[3 * i + ch] / weight[i]);
+      result.historyFrames.pixels[i] = static_cast<float>(weight[i] * weight[i] / squares[i]);
+    }
+  });
+  double total = 0.0;  // in pixel order, whatever the threads
+  for (float frames : result.historyFrames.pixels) total += frames;
   result.stats.accumulatedFrames = total / std::max<std::size_t>(1, n);
 }
 

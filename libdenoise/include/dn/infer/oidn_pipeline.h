@@ -52,7 +52,9 @@ class OidnPipeline : public Pipeline {
   bool controlApplies(const std::vector<std::string>& available) const;
 
  private:
-  DenoiseResult denoiseWithBase(const FrameBuffers& frame, const DenoiseOptions& options) const;
+  // `gate`: the noise the base left is measured (DenoiseResult::noiseLeft).
+  DenoiseResult denoiseWithBase(const FrameBuffers& frame, const DenoiseOptions& options,
+                                bool gate) const;
   DenoiseResult denoiseWithControl(const FrameBuffers& frame, const DenoiseOptions& options) const;
 
   ModelInfo info_;

@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -74,6 +75,12 @@ struct FrameBuffers {
   // denoising of the frame (its render accumulated over time) runs one network
   // on them, not the prefilter mode's three.
   bool auxPrefiltered = false;
+  // Whether the colour's noise is correlated between pixels (a splatting
+  // pixel filter), where known: a frame's render accumulated over time has
+  // the noise of the frame, whose first denoising measured it, and is steered
+  // as the frame was without measuring again. Unknown: measured where a
+  // Control Module could steer (ControlUse::Auto).
+  std::optional<bool> correlatedNoise;
   // Buffers of the source left out of the first read, and how to read them
   // (dn/io/buffer_io.h sets both): a pipeline reads what only one of its paths
   // needs when it takes that path, e.g. the Control Module's extra buffers.

@@ -97,7 +97,7 @@ struct Resampling {
   Image trust;  // reproject's
   bool empty() const { return taps.empty(); }
 };
-Resampling planResampling(const GuideImages& sourceGuides, const Image& positions,
+Resampling planResampling(const GuideImages& sourceGuides, Image positions,
                           const GuideImages& currentGuides, const TrustOptions& options = {});
 // `source` (any channel count) brought in by `plan`; zeros where trust is 0.
 Image resample(const Resampling& plan, const Image& source);
