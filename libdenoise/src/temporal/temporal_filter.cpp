@@ -85,30 +85,26 @@ double correlation(const Image& a, const Image& b, const Image& trust) {
   return aa > 0.0 && bb > 0.0 ? ab / std::sqrt(aa * bb) : 0.0;
 }
 
-// Per pixel, the mean over channels of |a - b|.
-std::vector<float> absoluteDifference(const Image& a, const Image& b) {
+// Per pixel, the mean over channels of |f(a) - b|.
+template <class Map>
+std::vector<float> absoluteDifference(const Image& a, const Image& b, Map f) {
   std::vector<float> d(a.pixelCount());
   for (std::size_t i = 0; i < d.size(); ++i) {
     double s = 0.0;
     for (int c = 0; c < a.channels; ++c)
-      s += std::abs(a.pixels[i * a.channels + c] - b.pixels[i * b.channels + c]);
+      s += std::abs(f(a.pixels[i * a.channels + c]) - b.pixels[i * b.channels + c]);
     d[i] = static_cast<float>(s / a.channels);
   }
   return d;
 }
 
+std::vector<float> absoluteDifference(const Image& a, const Image& b) {
+  return absoluteDifference(a, b, [](float v) { return v; });
+}
+
 // absoluteDifference(tonemapped(linear, scale), mapped), without the tonemapped image.
 std::vector<float> mappedDifference(const Image& linear, double scale, const Image& mapped) {
-  std::vector<float> d(linear.pixelCount());
-  const int channels = linear.channels;
-  for (std::size_t i = 0; i < d.size(); ++i) {
-    double s = 0.0;
-    for (int c = 0; c < channels; ++c)
-      s += std::abs(tonemappedValue(linear.pixels[i * channels + c], scale) -
-                    mapped.pixels[i * channels + c]);
-    d[i] = static_cast<float>(s / channels);
-  }
-  return d;
+  return absoluteDifference(linear, mapped, [scale](float v) { return tonemappedValue(v, scale); });
 }
 
 // The spread of the frames' leftover errors from the lower quartile of
