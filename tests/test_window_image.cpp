@@ -2,9 +2,11 @@
 // (every half exactly, floats rounded to the nearest with ties to even, the
 // processor's F16C path the same bits as the portable one), packing that keeps
 // a half-float file's values bit for bit, an image of one value as that value,
-// and the rounding of packed results within half's precision at any exposure.
+// the rounding of packed results within half's precision at any exposure, and
+// rows unpacked for threads.
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <stdexcept>
@@ -109,12 +111,54 @@ TEST_CASE("packing keeps a half-float file's values bit for bit, and others in f
   CHECK(exact.channels() == 3);
   CHECK_THROWS_AS(exact.floats(), std::logic_error);
 
-  Image rendered = fromHalfFile;
-  rendered.pixels[17] = 0.1f;  // no half holds it
-  WindowImage inFloats(rendered);
-  inFloats.packIfExact();
-  CHECK_FALSE(inFloats.packed());
-  CHECK(inFloats.floats().pixels == rendered.pixels);
+  // One value no half holds, anywhere: in a block of eight (the F16C path),
+  // at its edges, or in the tail past the last whole block (135 values).
+  for (std::size_t at : {std::size_t(0), std::size_t(7), std::size_t(8), std::size_t(17),
+                         std::size_t(127), std::size_t(128), std::size_t(134)}) {
+    for (float odd : {0.1f, std::numeric_limits<float>::quiet_NaN(), 1e-9f, 70000.0f}) {
+      CAPTURE(at);
+      CAPTURE(odd);
+      Image rendered = fromHalfFile;
+      rendered.pixels[at] = odd;
+      WindowImage inFloats(rendered);
+      inFloats.packIfExact();
+      CHECK_FALSE(inFloats.packed());
+      CHECK(std::memcmp(inFloats.floats().pixels.data(), rendered.pixels.data(),
+                        rendered.pixels.size() * sizeof(float)) == 0);
+    }
+  }
+  // Signed zeros and infinities are halves: packed, and back with their signs.
+  Image signs = fromHalfFile;
+  signs.pixels[3] = -0.0f, signs.pixels[40] = std::numeric_limits<float>::infinity();
+  signs.pixels[133] = -std::numeric_limits<float>::infinity();
+  WindowImage withSigns(signs);
+  withSigns.packIfExact();
+  CHECK(withSigns.packed());
+  const Image back = withSigns.toImage();
+  CHECK(std::memcmp(back.pixels.data(), signs.pixels.data(), signs.pixels.size() * 4) == 0);
+}
+
+TEST_CASE("rows in floats are the image's rows, packed or not, and only those rows are written") {
+  Image image(6, 5, 3);
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = 0.37f * i - 3.0f;
+  WindowImage rounded(image), exact(image), constant(Image(6, 5, 3, 2.5f)), asGiven(image);
+  rounded.pack();
+  exact.packIfExact();  // 0.37 i - 3 is no half for most i: held in floats
+  constant.pack();
+  CHECK(rounded.packed());
+  CHECK_FALSE(exact.packed());
+  CHECK(constant.packed());
+  for (const WindowImage* held : {&rounded, &exact, &constant, &asGiven}) {
+    const Image whole = held->toImage();
+    Image rows(6, 5, 3, -7.0f);
+    held->floatsRows(rows, 1, 3);
+    for (int y = 0; y < 5; ++y)
+      for (int x = 0; x < 6; ++x)
+        for (int c = 0; c < 3; ++c)
+          CHECK(rows.at(x, y, c) == (y >= 1 && y < 3 ? whole.at(x, y, c) : -7.0f));
+  }
+  Image wrongShape(5, 6, 3);
+  CHECK_THROWS_AS(rounded.floatsRows(wrongShape, 0, 1), std::invalid_argument);
 }
 
 TEST_CASE("an image of one value is held as that value, bit for bit, whatever the value") {

@@ -4,6 +4,7 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <future>
 #include <optional>
 #include <set>
@@ -12,6 +13,7 @@
 
 #include "dn/io/frame_pattern.h"
 #include "dn/motion/motion.h"
+#include "dn/temporal/parallel.h"
 
 namespace fs = std::filesystem;
 
@@ -67,24 +69,31 @@ struct Sequence::Input {
   std::array<const WindowImage*, std::size(kHeldInWindow)> windowCopies() const {
     return {&frame.noisy, &frame.guides.albedo, &frame.guides.normal, &frame.guides.depth};
   }
-  // The frame's buffers as read, put back together without decoding the file again.
-  FrameBuffers readAgain() const;
+  // The frame's buffers as read, put back together without decoding the file
+  // again, but for those of kHeldInWindow in `replaced` (the caller's own).
+  FrameBuffers readAgain(const std::set<std::string>& replaced = {}) const;
   // Drops the buffers the window frame holds too (only readAgain needs them).
   void dropHeld() {
     for (const auto& name : heldInWindow) buffers.buffers.erase(name);
   }
   // Once denoised: the window takes the buffers it holds (heldInBuffers), or
-  // they are dropped where it has its copies already.
-  void holdInWindow() {
-    if (!std::exchange(heldInBuffers, false)) return dropHeld();
+  // they are dropped where it has its copies already. The copies taken, to
+  // be packed where no bit changes (WindowImage::packIfExact).
+  std::vector<WindowImage*> holdInWindow() {
+    std::vector<WindowImage*> taken;
+    if (!std::exchange(heldInBuffers, false)) {
+      dropHeld();
+      return taken;
+    }
     const auto copies = windowCopies();
     for (std::size_t k = 0; k < copies.size(); ++k) {
       auto held = buffers.buffers.find(kHeldInWindow[k]);
       if (!heldInWindow.count(kHeldInWindow[k]) || held == buffers.buffers.end()) continue;
       *copies[k] = std::move(held->second);
-      copies[k]->packIfExact();
+      taken.push_back(copies[k]);
       buffers.buffers.erase(held);
     }
+    return taken;
   }
 };
 
@@ -234,13 +243,13 @@ std::optional<motion::MotionField> Sequence::motionOf(int number, const std::str
   return motion::readMotion(path, frame.width, frame.height, settings_.read.viewLayer);
 }
 
-FrameBuffers Sequence::Input::readAgain() const {
+FrameBuffers Sequence::Input::readAgain(const std::set<std::string>& replaced) const {
   FrameBuffers out = buffers;
   out.alpha = alpha.toImage();
   if (heldInBuffers) return out;
   const auto copies = windowCopies();
   for (std::size_t k = 0; k < copies.size(); ++k)
-    if (heldInWindow.count(kHeldInWindow[k]))
+    if (heldInWindow.count(kHeldInWindow[k]) && !replaced.count(kHeldInWindow[k]))
       out.buffers.emplace(kHeldInWindow[k], copies[k]->toImage());
   return out;
 }
@@ -263,19 +272,22 @@ std::shared_ptr<Sequence::Input> Sequence::input(int number, const FrameBuffers*
                    [&] { return settings_.viewDependentShare(path, frame); });
   entry->frame.noisy = frame.get("color");
   entry->frame.guides = guidesOf(frame, path, settings_.read);
-  if (auto field = motionOf(number, path, frame)) {
-    entry->frame.motion = std::move(*field);
-    entry->frame.motion.toPrevious.pack();
-    entry->frame.motion.toNext.pack();
-  }
-  // Packed only where no bit changes: Sequence::frame gives them back.
+  if (auto field = motionOf(number, path, frame)) entry->frame.motion = std::move(*field);
+  // The motion packed, the copies only where no bit changes (Sequence::frame
+  // gives them back), each image on a thread of the filter's.
   const auto copies = entry->windowCopies();
-  for (std::size_t k = 0; k < copies.size(); ++k) {
-    const char* name = kHeldInWindow[k];
-    if (frame.has(name) && frame.get(name).pixels == copies[k]->floats().pixels)
-      entry->heldInWindow.insert(name);
-    copies[k]->packIfExact();
-  }
+  std::array<bool, std::size(kHeldInWindow)> asRead{};
+  std::vector<std::function<void()>> packs = {[&] { entry->frame.motion.toPrevious.pack(); },
+                                              [&] { entry->frame.motion.toNext.pack(); }};
+  for (std::size_t k = 0; k < copies.size(); ++k)
+    packs.push_back([&, k] {
+      const char* name = kHeldInWindow[k];
+      asRead[k] = frame.has(name) && frame.get(name).pixels == copies[k]->floats().pixels;
+      copies[k]->packIfExact();
+    });
+  forEach(packs.size(), settings_.filter.threads, [&](std::size_t t) { packs[t](); });
+  for (std::size_t k = 0; k < copies.size(); ++k)
+    if (asRead[k]) entry->heldInWindow.insert(kHeldInWindow[k]);
   if (viewDependent.valid()) entry->frame.viewDependent = viewDependent.get();
   entry->frame.viewDependent.pack();
   if (given) {  // kept for Sequence::frame, but for what the window holds
@@ -310,18 +322,36 @@ std::shared_ptr<const DenoiseResult> Sequence::estimate(int number, const FrameB
   if (!self) return nullptr;
   auto result =
       std::make_shared<DenoiseResult>(denoise(fileOf(number), given ? *given : self->buffers));
-  self->holdInWindow();
   // The filter's input, held once, in half floats: the window holds it from
   // the frame ahead that is denoised first to the frame behind dropped last.
   self->frame.denoised = std::move(result->color);
-  self->frame.denoised.pack();
   self->cleanAlbedo = std::move(result->cleanAlbedo);
   self->cleanNormal = std::move(result->cleanNormal);
-  self->cleanAlbedo.pack();
-  self->cleanNormal.pack();
-  // Once cleaned, no network of the sequence reads the file's normal again
-  // (withHistory gives the clean one): it is a guide, held in half floats too.
-  if (!self->cleanNormal.empty() && !settings_.framesAsRead) self->frame.guides.normal.pack();
+  // Each image packed on a thread of the filter's: the buffers the window
+  // takes where no bit changes, its results rounded. Once cleaned, no network
+  // of the sequence reads the file's normal again (withHistory gives the
+  // clean one): it is a guide, rounded too.
+  struct Pack {
+    WindowImage* image;
+    bool exact, rounded;
+  };
+  std::vector<Pack> packs;
+  for (WindowImage* taken : self->holdInWindow()) packs.push_back({taken, true, false});
+  for (WindowImage* made : {&self->frame.denoised, &self->cleanAlbedo, &self->cleanNormal})
+    packs.push_back({made, false, true});
+  if (!self->cleanNormal.empty() && !settings_.framesAsRead) {
+    WindowImage* normal = &self->frame.guides.normal;
+    auto taken =
+        std::find_if(packs.begin(), packs.end(), [&](const Pack& p) { return p.image == normal; });
+    if (taken != packs.end())
+      taken->rounded = true;
+    else
+      packs.push_back({normal, false, true});
+  }
+  forEach(packs.size(), settings_.filter.threads, [&](std::size_t k) {
+    if (packs[k].exact) packs[k].image->packIfExact();
+    if (packs[k].rounded) packs[k].image->pack();
+  });
   return estimates_[number] = result;
 }
 
@@ -402,11 +432,16 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers* given, TemporalR
                                 const Denoise& denoise) {
   Input& self = *inputs_.at(number);
   // Where no neighbour was trusted the history is the frame's own render.
+  // withHistory replaces its colour, and its guides where cleaned: those are
+  // not unpacked.
+  const bool cleaned = !self.cleanAlbedo.empty() && !self.cleanNormal.empty();
+  const std::set<std::string> replaced =
+      cleaned ? std::set<std::string>{"color", "albedo", "normal"} : std::set<std::string>{"color"};
   Image history =
       filtered.stats.accumulatedFrames > 1.0
-          ? denoise(fileOf(number),
-                    withHistory(given ? *given : self.readAgain(), std::move(filtered.history),
-                                *estimates_.at(number), self.cleanAlbedo, self.cleanNormal))
+          ? denoise(fileOf(number), withHistory(given ? *given : self.readAgain(replaced),
+                                                std::move(filtered.history), *estimates_.at(number),
+                                                self.cleanAlbedo, self.cleanNormal))
                 .color
           : self.frame.denoised.toImage();
   if (self.onDevice)

@@ -1,53 +1,20 @@
 #include "dn/temporal/temporal_filter.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
-#include <exception>
 #include <functional>
-#include <mutex>
+#include <numeric>
 #include <optional>
 #include <stdexcept>
-#include <thread>
 
+#include "dn/temporal/parallel.h"
 #include "dn/tonemap.h"
 
 namespace dn::temporal {
 
 namespace {
-
-// Runs task(0 .. count-1) on up to `threads` threads; the first exception
-// thrown is rethrown here, after every thread has stopped.
-void forEach(std::size_t count, int threads, const std::function<void(std::size_t)>& task) {
-  std::atomic<std::size_t> next{0};
-  std::exception_ptr failure;
-  std::mutex failureMutex;
-  auto worker = [&] {
-    try {
-      for (std::size_t i = next++; i < count; i = next++) task(i);
-    } catch (...) {
-      next = count;  // the others stop after their current task
-      std::lock_guard<std::mutex> lock(failureMutex);
-      if (!failure) failure = std::current_exception();
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < std::min<int>(threads, static_cast<int>(count)); ++t)
-    pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
-  if (failure) std::rethrow_exception(failure);
-}
-
-// Runs range(begin, end) over bands of [0, count) on up to `threads` threads.
-void forBands(std::size_t count, int threads,
-              const std::function<void(std::size_t, std::size_t)>& range) {
-  const std::size_t bands = std::clamp<std::size_t>(threads, 1, std::max<std::size_t>(count, 1));
-  forEach(bands, threads,
-          [&](std::size_t b) { range(b * count / bands, (b + 1) * count / bands); });
-}
 
 // Reinhard's x / (1 + x) after `scale`, OIDN's autoexposure of the frame's
 // result: differences then weigh as they show, in dark and bright frames alike.
@@ -725,18 +692,20 @@ void applyLearnedTrust(Contribution& k, const std::vector<float>& features,
 void accumulateNoisy(const WindowFrame& current, const std::vector<const WindowFrame*>& frames,
                      const std::vector<Contribution>& contributions, int threads,
                      TemporalResult& result) {
-  Image ownScratch, noisyScratch;
+  Image ownScratch;
   const Image& own = current.noisy.floats(ownScratch);
   const std::size_t n = own.pixelCount();
   std::vector<double> sum(own.pixels.begin(), own.pixels.end());
   std::vector<double> weight(n, 1.0), squares(n, 1.0);
-  // Each pixel summed in the neighbours' order, over bands of rows; `moved`
-  // holds one neighbour's render at a time (unpacked one at a time).
-  Image moved(own.width, own.height, 3);
+  // Each pixel summed in the neighbours' order, over bands of rows; `noisy`
+  // and `moved` hold one neighbour's render at a time (unpacked in bands too).
+  Image noisy(own.width, own.height, own.channels), moved(own.width, own.height, 3);
   for (std::size_t k = 0; k < contributions.size(); ++k) {
     const Contribution& c = contributions[k];
     if (c.weight.empty()) continue;
-    const Image& noisy = frames[k]->noisy.floats(noisyScratch);
+    forBands(own.height, threads, [&](std::size_t y0, std::size_t y1) {
+      frames[k]->noisy.floatsRows(noisy, int(y0), int(y1));
+    });
     forBands(own.height, threads, [&](std::size_t y0, std::size_t y1) {
       motion::reprojectNearestRows(noisy, c.resampling.positions, int(y0), int(y1), moved);
       for (std::size_t i = y0 * own.width; i < y1 * own.width; ++i) {
@@ -884,8 +853,19 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
       neighbours[first + k].positions = std::move(along[side][k]);
   }
   Centre& c = *centreImages;
+  // The nearest neighbours first: they share the most of the frame and take
+  // the longest to test, so the last task left to run alone is a short one.
+  std::vector<std::size_t> nearestFirst(neighbours.size());
+  std::iota(nearestFirst.begin(), nearestFirst.end(), 0);
+  std::stable_sort(nearestFirst.begin(), nearestFirst.end(), [&](std::size_t a, std::size_t b) {
+    auto distance = [&](std::size_t n) {
+      return std::labs(long(neighbours[n].index) - long(centre));
+    };
+    return distance(a) < distance(b);
+  });
   std::vector<Contribution> contributions(neighbours.size());
-  forEach(neighbours.size(), options.threads, [&](std::size_t n) {
+  forEach(neighbours.size(), options.threads, [&](std::size_t task) {
+    const std::size_t n = nearestFirst[task];
     Neighbour& nb = neighbours[n];
     contributions[n] = contributionOf(c, *nb.frame, std::move(nb.positions), nb.forward, options);
   });

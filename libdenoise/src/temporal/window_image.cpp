@@ -54,7 +54,36 @@ __attribute__((target("avx,f16c"))) std::size_t toFloatsF16c(const std::uint16_t
   }
   return i;
 }
+
+// toHalvesWhileExact's blocks of 8: stops at the first block holding a value
+// that does not come back (NaN never does), and returns where it starts.
+__attribute__((target("avx,f16c"))) std::size_t toHalvesWhileExactF16c(const float* in,
+                                                                       std::size_t count,
+                                                                       std::uint16_t* out) {
+  std::size_t i = 0;
+  for (; i + 8 <= count; i += 8) {
+    const __m256 v = _mm256_loadu_ps(in + i);
+    const __m128i h = _mm256_cvtps_ph(v, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+    if (_mm256_movemask_ps(_mm256_cmp_ps(_mm256_cvtph_ps(h), v, _CMP_NEQ_UQ))) break;
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i), h);
+  }
+  return i;
+}
 #endif
+
+// Converts in[0, count) into half floats while each converts back to its
+// value: how many did before the first that does not (count where all do).
+std::size_t toHalvesWhileExact(const float* in, std::size_t count, std::uint16_t* out) {
+  std::size_t i = 0;
+#ifdef DN_F16C
+  if (hasF16c()) i = toHalvesWhileExactF16c(in, count, out);
+#endif
+  for (; i < count; ++i) {
+    out[i] = halfOf(in[i]);
+    if (floatOf(out[i]) != in[i]) return i;
+  }
+  return count;
+}
 
 // The scale exponent that brings the largest magnitude below 2^15.
 int exponentFor(const std::vector<float>& values) {
@@ -127,9 +156,8 @@ bool WindowImage::packIfConstant() {
 void WindowImage::packIfExact() {
   if (packed() || floats_.empty() || packIfConstant()) return;
   std::vector<std::uint16_t> halves(floats_.pixels.size());
-  toHalves(floats_.pixels.data(), halves.size(), 1.0f, halves.data());
-  for (std::size_t i = 0; i < halves.size(); ++i)
-    if (floatOf(halves[i]) != floats_.pixels[i]) return;  // NaN never equals itself
+  if (toHalvesWhileExact(floats_.pixels.data(), halves.size(), halves.data()) != halves.size())
+    return;
   halves_ = std::move(halves);
   exponent_ = 0;
   floats_.pixels = std::vector<float>();
@@ -159,6 +187,19 @@ const Image& WindowImage::floats(Image& scratch) const {
   scratch = Image(floats_.width, floats_.height, floats_.channels);
   toFloats(halves_.data(), halves_.size(), std::ldexp(1.0f, -exponent_), scratch.pixels.data());
   return scratch;
+}
+
+void WindowImage::floatsRows(Image& out, int rowBegin, int rowEnd) const {
+  if (!out.sameShape(floats_)) throw std::invalid_argument("WindowImage: rows into another shape");
+  const std::size_t row = static_cast<std::size_t>(out.width) * out.channels;
+  const std::size_t begin = rowBegin * row, end = rowEnd * row;
+  float* to = out.pixels.data() + begin;
+  if (!packed())
+    std::copy(floats_.pixels.begin() + begin, floats_.pixels.begin() + end, to);
+  else if (constant_)
+    std::fill(to, to + (end - begin), value_);
+  else
+    toFloats(halves_.data() + begin, end - begin, std::ldexp(1.0f, -exponent_), to);
 }
 
 Image WindowImage::toImage() const {

@@ -39,6 +39,9 @@ class WindowImage {
   // The image in floats: itself where held so, else unpacked into `scratch`.
   const Image& floats(Image& scratch) const;
   Image toImage() const;
+  // Rows [rowBegin, rowEnd) of the image in floats into the same rows of
+  // `out` (of the image's shape): for callers that split the rows among threads.
+  void floatsRows(Image& out, int rowBegin, int rowEnd) const;
   // The image itself, to build a frame with; throws std::logic_error where packed.
   Image& floats();
   const Image& floats() const;
