@@ -138,12 +138,15 @@ class BoxSums {
     const int y = made_++;
     const double* above = row(y);
     double* made = row(y + 1);
+    // v_ is all zeros before each pixel (a values_ that takes nothing there
+    // writes none): cleared as it is read, without a call a pixel.
     for (int x = 0; x < width_; ++x) {
-      std::fill(v_.begin(), v_.end(), 0.0);
       values_(static_cast<std::size_t>(y) * width_ + x, v_.data());
-      for (int k = 0; k < count_; ++k)
+      for (int k = 0; k < count_; ++k) {
         made[(x + 1) * count_ + k] =
             v_[k] + above[(x + 1) * count_ + k] + made[x * count_ + k] - above[x * count_ + k];
+        v_[k] = 0.0;
+      }
     }
   }
   // Integral row y (of the 2r+2 kept) and its values, column after column.
