@@ -212,6 +212,27 @@ TEST_CASE(
   }
 }
 
+TEST_CASE("exactly the frames that took from their neighbours are denoised again, and -v says so") {
+  CountedShot counted;
+  auto shot = counted.plan();
+  REQUIRE(shot);
+  int again = 0, took = 0;
+  const Sequence::Denoise denoise = [&](const std::string& path, const FrameBuffers& frame) {
+    again += frame.auxPrefiltered;
+    DenoiseResult result = asRenderedCleaned(path, frame);
+    result.color = blurred(result.color);
+    return result;
+  };
+  for (const auto& file : counted.files) {
+    shot->denoise(file, counted.read, denoise);
+    const bool accumulated = shot->lastStats().accumulatedFrames > 1.0;
+    took += accumulated;
+    CHECK((shot->report().find("denoised again") != std::string::npos) == accumulated);
+  }
+  CHECK(again == took);
+  CHECK(took >= 4);
+}
+
 TEST_CASE("a neighbour's companions are made from the frame as read, each file decoded once") {
   CountedShot counted;
   auto shot = counted.plan();

@@ -121,11 +121,24 @@ motion::Guides guidesOf(const FrameBuffers& frame, const std::string& path,
   return g;
 }
 
+// Whether the frame's first denoising cleaned its albedo and normal (the
+// prefilter mode): then they replace the file's guides.
+bool guidesCleaned(const WindowImage& cleanAlbedo, const WindowImage& cleanNormal) {
+  return !cleanAlbedo.empty() && !cleanNormal.empty();
+}
+
+// The frame's buffers that withCleanedGuides replaces, and so need not be read again.
+std::set<std::string> cleanedGuideNames(const WindowImage& cleanAlbedo,
+                                        const WindowImage& cleanNormal) {
+  if (!guidesCleaned(cleanAlbedo, cleanNormal)) return {};
+  return {"albedo", "normal"};
+}
+
 // The frame with its albedo and normal replaced by the prefilter's where its
 // first denoising cleaned them.
 FrameBuffers withCleanedGuides(FrameBuffers out, const WindowImage& cleanAlbedo,
                                const WindowImage& cleanNormal) {
-  if (!cleanAlbedo.empty() && !cleanNormal.empty()) {
+  if (guidesCleaned(cleanAlbedo, cleanNormal)) {
     out.buffers["albedo"] = cleanAlbedo.toImage();
     out.buffers["normal"] = cleanNormal.toImage();
     out.auxPrefiltered = true;
@@ -434,18 +447,17 @@ Image Sequence::denoisedHistory(int number, const FrameBuffers* given, TemporalR
   // Where no neighbour was trusted the history is the frame's own render.
   // withHistory replaces its colour, and its guides where cleaned: those are
   // not unpacked.
-  const bool cleaned = !self.cleanAlbedo.empty() && !self.cleanNormal.empty();
-  const std::set<std::string> replaced =
-      cleaned ? std::set<std::string>{"color", "albedo", "normal"} : std::set<std::string>{"color"};
+  std::set<std::string> replaced = cleanedGuideNames(self.cleanAlbedo, self.cleanNormal);
+  replaced.insert("color");
   Image history =
-      filtered.stats.accumulatedFrames > 1.0
+      denoisesAgain(filtered.stats)
           ? denoise(fileOf(number), withHistory(given ? *given : self.readAgain(replaced),
                                                 std::move(filtered.history), *estimates_.at(number),
                                                 self.cleanAlbedo, self.cleanNormal))
                 .color
           : self.frame.denoised.toImage();
   if (self.onDevice)
-    self.onDevice->history = filtered.stats.accumulatedFrames > 1.0
+    self.onDevice->history = denoisesAgain(filtered.stats)
                                  ? pixelsToDevice(history, *settings_.filterDevice)
                                  : self.onDevice->denoised;
   self.frame.history = history;  // the later frames' past history, in half floats
@@ -469,7 +481,7 @@ void Sequence::makePastHistories(int number, const Read& read, const Denoise& de
           earlier.device ? earlier.device->weights.toHost() : std::move(earlier.result.weights);
       companionHistories(
           m, nullptr,
-          filteredCompanions(m, weights, companions, earlier.result.stats.accumulatedFrames > 1.0),
+          filteredCompanions(m, weights, companions, denoisesAgain(earlier.result.stats)),
           companions);
     }
     earlier.result.weights = FilterWeights();
@@ -544,8 +556,9 @@ std::map<std::string, Image> Sequence::companionHistories(int number, const Fram
   Input& input = *inputs_.at(number);
   std::map<std::string, Image> again;
   if (!passes.accumulated.empty()) {
-    const FrameBuffers guides =
-        withCleanedGuides(given ? *given : input.readAgain(), input.cleanAlbedo, input.cleanNormal);
+    const FrameBuffers guides = withCleanedGuides(
+        given ? *given : input.readAgain(cleanedGuideNames(input.cleanAlbedo, input.cleanNormal)),
+        input.cleanAlbedo, input.cleanNormal);
     again = make.denoiseAccumulated(guides, passes.accumulated);
   }
   // Where nothing was accumulated the history is the companion itself, as
@@ -623,8 +636,7 @@ Sequence::WithCompanions Sequence::denoiseFrame(const std::string& file, const F
   if (companions.make) {
     FilterWeights weights =
         self.device ? self.device->weights.toHost() : std::move(self.result.weights);
-    passes = filteredCompanions(n, weights, companions,
-                                again && self.result.stats.accumulatedFrames > 1.0);
+    passes = filteredCompanions(n, weights, companions, again && denoisesAgain(self.result.stats));
     if (again)
       pastTaps =
           pastHistoryTaps(std::move(weights), self.device ? self.device->pastHistories.frames
@@ -687,7 +699,7 @@ std::string Sequence::report() const {
   add(", %d brought to it where its light drifted", s.drifted);
   add(", %d with the light changed over the frame and left out", s.changedLight);
   std::string out = std::string(line) + ")";
-  if (settings_.filter.accumulatedShare > 0.0 && s.accumulatedFrames > 1.0) {
+  if (settings_.filter.accumulatedShare > 0.0 && denoisesAgain(s)) {
     std::snprintf(line, sizeof line, "; its render accumulated over %.1f frames, denoised again",
                   s.accumulatedFrames);
     out += line;

@@ -180,12 +180,8 @@ std::size_t WindowImage::bytes() const {
 
 const Image& WindowImage::floats(Image& scratch) const {
   if (!packed()) return floats_;
-  if (constant_) {
-    scratch = Image(floats_.width, floats_.height, floats_.channels, value_);
-    return scratch;
-  }
-  scratch = Image(floats_.width, floats_.height, floats_.channels);
-  toFloats(halves_.data(), halves_.size(), std::ldexp(1.0f, -exponent_), scratch.pixels.data());
+  if (!scratch.sameShape(floats_)) scratch = Image(floats_.width, floats_.height, floats_.channels);
+  floatsRows(scratch, 0, floats_.height);
   return scratch;
 }
 

@@ -234,6 +234,10 @@ class Sequence {
   void forget(int number);
   // aloneBecause() of the frame held as `input`, filtered as `filtered`.
   static std::string aloneBecause(const Input& input, const Filtered& filtered);
+  // Whether a frame's accumulated render (and its light passes') is denoised
+  // again: wherever it took anything from its neighbours. Even a frame that
+  // took little gains from it (docs/RESULTS.md, "Where the second denoising pays").
+  static bool denoisesAgain(const TemporalStats& stats) { return stats.accumulatedFrames > 1.0; }
 
   std::string pattern_;
   std::map<std::string, int> numbers_;  // input file -> frame number
