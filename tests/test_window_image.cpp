@@ -159,6 +159,29 @@ TEST_CASE("rows in floats are the image's rows, packed or not, and only those ro
   }
   Image wrongShape(5, 6, 3);
   CHECK_THROWS_AS(rounded.floatsRows(wrongShape, 0, 1), std::invalid_argument);
+  Image movedOut(6, 5, 3);
+  const std::vector<float> taken = std::move(movedOut.pixels);
+  CHECK_THROWS_AS(rounded.floatsRows(movedOut, 0, 1), std::invalid_argument);
+}
+
+TEST_CASE("an image unpacked into a scratch reuses it where it fits, and remakes it where not") {
+  Image image(6, 5, 3);
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = 0.37f * i - 3.0f;
+  WindowImage rounded(image);
+  rounded.pack();
+  const Image whole = rounded.toImage();
+  Image fits(6, 5, 3, -7.0f), other(2, 2, 3), movedOut(6, 5, 3);
+  const float* kept = fits.pixels.data();
+  CHECK(rounded.floats(fits).pixels == whole.pixels);
+  CHECK(fits.pixels.data() == kept);
+  CHECK(rounded.floats(other).pixels == whole.pixels);
+  const std::vector<float> taken = std::move(movedOut.pixels);
+  CHECK(rounded.floats(movedOut).pixels == whole.pixels);
+  // Held in floats: the image itself, the scratch untouched.
+  const WindowImage asGiven(image);
+  Image untouched(1, 1, 3, -7.0f);
+  CHECK(&asGiven.floats(untouched) != &untouched);
+  CHECK(untouched.pixels == std::vector<float>(3, -7.0f));
 }
 
 TEST_CASE("an image of one value is held as that value, bit for bit, whatever the value") {

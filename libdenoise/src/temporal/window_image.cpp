@@ -180,13 +180,16 @@ std::size_t WindowImage::bytes() const {
 
 const Image& WindowImage::floats(Image& scratch) const {
   if (!packed()) return floats_;
-  if (!scratch.sameShape(floats_)) scratch = Image(floats_.width, floats_.height, floats_.channels);
+  // Kept where it has the shape and its pixels (not moved out).
+  if (!scratch.sameShape(floats_) || scratch.size() != floats_.pixelCount() * floats_.channels)
+    scratch = Image(floats_.width, floats_.height, floats_.channels);
   floatsRows(scratch, 0, floats_.height);
   return scratch;
 }
 
 void WindowImage::floatsRows(Image& out, int rowBegin, int rowEnd) const {
-  if (!out.sameShape(floats_)) throw std::invalid_argument("WindowImage: rows into another shape");
+  if (!out.sameShape(floats_) || out.size() != floats_.pixelCount() * floats_.channels)
+    throw std::invalid_argument("WindowImage: rows into another shape");
   const std::size_t row = static_cast<std::size_t>(out.width) * out.channels;
   const std::size_t begin = rowBegin * row, end = rowEnd * row;
   float* to = out.pixels.data() + begin;
