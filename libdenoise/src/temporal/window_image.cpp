@@ -178,18 +178,19 @@ std::size_t WindowImage::bytes() const {
   return halves_.size() * sizeof(std::uint16_t) + floats_.pixels.size() * sizeof(float);
 }
 
+bool WindowImage::holds(const Image& image) const {
+  return image.sameShape(floats_) && image.size() == floats_.pixelCount() * floats_.channels;
+}
+
 const Image& WindowImage::floats(Image& scratch) const {
   if (!packed()) return floats_;
-  // Kept where it has the shape and its pixels (not moved out).
-  if (!scratch.sameShape(floats_) || scratch.size() != floats_.pixelCount() * floats_.channels)
-    scratch = Image(floats_.width, floats_.height, floats_.channels);
+  if (!holds(scratch)) scratch = Image(floats_.width, floats_.height, floats_.channels);
   floatsRows(scratch, 0, floats_.height);
   return scratch;
 }
 
 void WindowImage::floatsRows(Image& out, int rowBegin, int rowEnd) const {
-  if (!out.sameShape(floats_) || out.size() != floats_.pixelCount() * floats_.channels)
-    throw std::invalid_argument("WindowImage: rows into another shape");
+  if (!holds(out)) throw std::invalid_argument("WindowImage: rows into another shape");
   const std::size_t row = static_cast<std::size_t>(out.width) * out.channels;
   const std::size_t begin = rowBegin * row, end = rowEnd * row;
   float* to = out.pixels.data() + begin;

@@ -47,6 +47,9 @@ class WindowImage {
   const Image& floats() const;
 
  private:
+  // Whether `image` has this one's shape and its pixels (not moved out).
+  bool holds(const Image& image) const;
+
   Image floats_;                       // the image; packed, its shape with no pixels
   std::vector<std::uint16_t> halves_;  // packed: the values times 2^exponent_
   int exponent_ = 0;
