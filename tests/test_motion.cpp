@@ -596,6 +596,27 @@ TEST_CASE("temporal filter: the two estimates blend by the accumulated share") {
   CHECK(half.at(1, 0, 2) == 3.0f);
   CHECK(temporal::blendWithHistory(filtered, accumulated, 0.0).pixels == filtered.pixels);
   CHECK_THROWS_AS(temporal::blendWithHistory(filtered, Image(1, 1, 3), 0.5), std::invalid_argument);
+
+  // A share per pixel: all of the filtered in one, all of the history in the other.
+  Image share(2, 1, 1, 0.0f);
+  share.at(1, 0, 0) = 1.0f;
+  const Image perPixel = temporal::blendWithHistory(filtered, accumulated, share);
+  CHECK(perPixel.at(0, 0, 1) == 1.0f);
+  CHECK(perPixel.at(1, 0, 2) == 5.0f);
+  CHECK_THROWS_AS(temporal::blendWithHistory(filtered, accumulated, Image(2, 1, 3)),
+                  std::invalid_argument);
+}
+
+TEST_CASE("a view-dependent pass's history share follows the frames its render gathered") {
+  temporal::TemporalOptions options;
+  options.accumulatedShare = 0.35, options.viewDependentShareAlone = 0.2;
+  Image frames(4, 1, 1);
+  frames.pixels = {1.0f, 1.5f, 2.0f, 7.0f};
+  const Image share = temporal::viewDependentShare(frames, options);
+  CHECK(share.pixels[0] == doctest::Approx(0.2));
+  CHECK(share.pixels[1] == doctest::Approx(0.275));
+  CHECK(share.pixels[2] == doctest::Approx(0.35));
+  CHECK(share.pixels[3] == doctest::Approx(0.35));
 }
 
 TEST_CASE("temporal filter: the past frames' denoised histories average with the frame's own") {
@@ -996,7 +1017,10 @@ TEST_CASE(
     CHECK(temporal::filterWith(r.weights, results).pixels == r.color.pixels);
     // The renders accumulate as the filter accumulated them, bit for bit.
     const std::vector<const Image*> renders = imagesOf(*frames, &temporal::WindowFrame::noisy);
-    CHECK(temporal::accumulateWith(r.weights, renders, results).pixels == r.history.pixels);
+    Image counts;
+    CHECK(temporal::accumulateWith(r.weights, renders, results, 0.0, &counts).pixels ==
+          r.history.pixels);
+    CHECK(counts.pixels == r.historyFrames.pixels);
     CHECK_THROWS_AS(temporal::accumulateWith(r.weights, {nullptr, nullptr, nullptr}, results),
                     std::invalid_argument);
     // A neighbour without the image is left out; alone, the frame's own is kept.
@@ -1063,6 +1087,12 @@ TEST_CASE("a view-dependent pass takes a neighbour only where the surface stood 
   const temporal::FilterWeights panWeights = temporal::filterFrame(windowOf(pan), 1).weights;
   REQUIRE(panWeights.neighbours.size() == 2);
   CHECK(temporal::filterWith(panWeights, images, 0.5).pixels == pass[1].pixels);
+  // Its render gathers frames where the surface stood still, none on the pan.
+  Image frames;
+  temporal::accumulateWith(stillWeights, images, images, 0.5, &frames);
+  CHECK(*std::min_element(frames.pixels.begin(), frames.pixels.end()) > 1.5f);
+  temporal::accumulateWith(panWeights, images, images, 0.5, &frames);
+  CHECK(std::all_of(frames.pixels.begin(), frames.pixels.end(), [](float f) { return f == 1.0f; }));
 }
 
 TEST_CASE("a relit neighbour's pass is not taken where that pass's light came or went") {

@@ -544,8 +544,12 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
     }
     const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;
     out.filtered[name] = filterWith(weights, images, still);
-    if (accumulate && !own.render.empty())
-      out.accumulated[name] = accumulateWith(weights, renders, images, still);
+    if (accumulate && !own.render.empty()) {
+      Image frames;
+      out.accumulated[name] =
+          accumulateWith(weights, renders, images, still, own.viewDependent ? &frames : nullptr);
+      if (own.viewDependent) out.historyShare[name] = viewDependentShare(frames, settings_.filter);
+    }
   }
   return out;
 }
@@ -663,9 +667,14 @@ Sequence::WithCompanions Sequence::denoiseFrame(const std::string& file, const F
   }
   pastTaps = FilterWeights();
   if (again)
-    for (const auto& [name, own] : companionHistories(n, given, passes, companions))
-      passes.filtered.at(name) = blendWithHistory(
-          passes.filtered.at(name), companionHistoryMean(n, name, own, pastHistories), share);
+    for (const auto& [name, own] : companionHistories(n, given, passes, companions)) {
+      Image& pass = passes.filtered.at(name);
+      const Image history = companionHistoryMean(n, name, own, pastHistories);
+      auto perPixel = passes.historyShare.find(name);
+      pass = perPixel != passes.historyShare.end()
+                 ? blendWithHistory(pass, history, perPixel->second)
+                 : blendWithHistory(pass, history, share);
+    }
   out.companions = std::move(passes.filtered);
   return out;
 }

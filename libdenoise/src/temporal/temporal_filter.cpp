@@ -943,13 +943,28 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
 
 namespace {
 
+// Per pixel, (sum w)^2 / sum w^2 over the frame (weighing 1) and `others`.
+Image effectiveFrames(const Image& own, const std::vector<Weighted>& others) {
+  const std::size_t n = own.pixelCount();
+  std::vector<double> weight(n, 1.0), squares(n, 1.0);
+  for (const Weighted& k : others)
+    for (std::size_t i = 0; i < std::min(n, k.weight->size()); ++i) {
+      const double w = (*k.weight)[i];
+      if (w > 0.0) weight[i] += w, squares[i] += w * w;
+    }
+  Image out(own.width, own.height, 1);
+  for (std::size_t i = 0; i < n; ++i)
+    out.pixels[i] = static_cast<float>(weight[i] * weight[i] / squares[i]);
+  return out;
+}
+
 // `images` over the window by `weights`, each neighbour's brought in
 // resampled (or at the nearest pixel: a render, whose noise resampling would
 // correlate), a relit one by the factor of its `lightOf` image, as filterWith
 // and accumulateWith document.
 Image combineOver(const char* caller, const FilterWeights& weights,
                   const std::vector<const Image*>& images, const std::vector<const Image*>& lightOf,
-                  double stillPixels, bool nearest) {
+                  double stillPixels, bool nearest, Image* frames = nullptr) {
   auto at = [](const std::vector<const Image*>& v, std::size_t k) {
     return k < v.size() ? v[k] : nullptr;
   };
@@ -996,6 +1011,7 @@ Image combineOver(const char* caller, const FilterWeights& weights,
     moved.push_back(std::move(in));
     others.push_back({&moved.back(), weight});
   }
+  if (frames) *frames = effectiveFrames(*own, others);
   return toImage(weightedMean(*own, others).value, *own);
 }
 
@@ -1007,8 +1023,8 @@ Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& 
 }
 
 Image accumulateWith(const FilterWeights& weights, const std::vector<const Image*>& renders,
-                     const std::vector<const Image*>& results, double stillPixels) {
-  return combineOver("accumulateWith", weights, renders, results, stillPixels, true);
+                     const std::vector<const Image*>& results, double stillPixels, Image* frames) {
+  return combineOver("accumulateWith", weights, renders, results, stillPixels, true, frames);
 }
 
 namespace {
@@ -1067,6 +1083,28 @@ Image historyMean(const Image& own, const TemporalResult& result, const Temporal
   Image out = own;
   std::transform(mean.begin(), mean.end(), out.pixels.begin(),
                  [](double v) { return static_cast<float>(v); });
+  return out;
+}
+
+Image viewDependentShare(const Image& frames, const TemporalOptions& options) {
+  const double full = options.accumulatedShare;
+  const double alone = std::min(options.viewDependentShareAlone, full);
+  Image out = frames;
+  for (float& f : out.pixels)
+    f = static_cast<float>(alone + (full - alone) * std::clamp(f - 1.0, 0.0, 1.0));
+  return out;
+}
+
+Image blendWithHistory(const Image& filtered, const Image& accumulated, const Image& share) {
+  if (!filtered.sameShape(accumulated) || share.channels != 1 ||
+      share.pixelCount() != filtered.pixelCount())
+    throw std::invalid_argument("blendWithHistory: the images differ in shape");
+  Image out = filtered;
+  const int channels = out.channels;
+  for (std::size_t i = 0; i < out.pixels.size(); ++i) {
+    const double s = share.pixels[i / channels];
+    out.pixels[i] = static_cast<float>((1.0 - s) * filtered.pixels[i] + s * accumulated.pixels[i]);
+  }
   return out;
 }
 

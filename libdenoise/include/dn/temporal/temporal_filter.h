@@ -156,6 +156,11 @@ struct TemporalOptions {
   // denoising the default-size network on the prefilter's aux): 0.3 to 0.4
   // within 0.02 dB at 4 and 16 spp, 0.5 0.04-0.07 dB less, 0.6 0.1-0.16 less.
   double accumulatedShare = 0.35;
+  // A view-dependent light pass's share where its render gathered nothing
+  // (where it moved on screen), rising to accumulatedShare at two frames:
+  // there its history is only a smaller network's second opinion of the same
+  // render, which the glossy passes gain less from than the colour does.
+  double viewDependentShareAlone = 0.2;
   // The past frames' denoised histories count where the surface stood still
   // on screen, fully, falling to nothing at this many pixels of motion. Where
   // it moved, each was resampled on its way in and its errors follow the
@@ -263,10 +268,12 @@ Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& 
 // neighbour's brought in at the nearest pixel and weighed as filterWith
 // weighs it, a relit one by the factor of its `results` image (the same
 // image denoised), stillPixels as there. With the frames' renders and results
-// it gives TemporalResult::history bit for bit. Throws std::invalid_argument
-// when the centre's render or result is missing.
+// it gives TemporalResult::history bit for bit; `frames`, where given, gets
+// its effective number of frames per pixel, as TemporalResult::historyFrames. Throws
+// std::invalid_argument when the centre's render or result is missing.
 Image accumulateWith(const FilterWeights& weights, const std::vector<const Image*>& renders,
-                     const std::vector<const Image*>& results, double stillPixels = 0.0);
+                     const std::vector<const Image*>& results, double stillPixels = 0.0,
+                     Image* frames = nullptr);
 
 // The frame's accumulated render, denoised (`own`), averaged with its past
 // neighbours' as its result was with theirs where the surface stood still,
@@ -297,5 +304,12 @@ FilterWeights pastWeights(const FilterWeights& taps, const std::vector<std::size
 // neighbour was trusted the history is the frame's own render, so both are
 // the frame denoised alone.
 Image blendWithHistory(const Image& filtered, const Image& accumulated, double share);
+// A view-dependent light pass's share of its history per pixel, from the
+// effective frames its render accumulated (accumulateWith's `frames`):
+// TemporalOptions::viewDependentShareAlone (at most accumulatedShare) at one
+// frame, rising linearly to accumulatedShare at two.
+Image viewDependentShare(const Image& frames, const TemporalOptions& options);
+// blendWithHistory with a share per pixel (a one-channel image).
+Image blendWithHistory(const Image& filtered, const Image& accumulated, const Image& share);
 
 }  // namespace dn::temporal
