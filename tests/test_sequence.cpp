@@ -292,3 +292,54 @@ TEST_CASE("a companion made as the colour is filtered, accumulated and averaged 
   }
   CHECK(averaged >= 4);
 }
+
+TEST_CASE("a view-dependent companion's history share follows what its render gathered") {
+  // As above, the view-dependent gate off so that the glossy companion takes
+  // the colour's weights: at the colour's share everywhere it comes out as
+  // the colour; with none where its render gathered one frame, it differs
+  // where it gathered under two, but not where it gathered two or more.
+  auto run = [](double alone) {
+    temporal::SequenceSettings settings;
+    settings.filter.changedLightSpread = settings.filter.changedLightMean = 1e9;
+    settings.filter.driftThreshold = 0.0;
+    settings.filter.viewDependentMotion = 0.0;
+    settings.filter.accumulatedShare = 0.5;
+    settings.filter.viewDependentShareAlone = alone;
+    CountedShot counted;
+    auto shot = counted.plan(settings);
+    REQUIRE(shot);
+    temporal::CompanionMaker maker;
+    maker.make = [](const std::string&, const FrameBuffers& frame) {
+      temporal::Companions companions;
+      for (const char* name : {"colour", "glossy"}) {
+        companions[name].image = blurred(frame.get("color"));
+        companions[name].render = frame.get("color");
+      }
+      companions["glossy"].viewDependent = true;
+      return companions;
+    };
+    maker.denoiseAccumulated = [](const FrameBuffers&,
+                                  const std::map<std::string, Image>& renders) {
+      std::map<std::string, Image> out;
+      for (const auto& [name, render] : renders) out[name] = blurred(render);
+      return out;
+    };
+    std::pair<Image, Image> third;  // the colour's and the glossy companion's
+    for (int n = 0; n < 3; ++n) {
+      const std::string& file = counted.files[n];
+      auto out =
+          shot->denoise(file, shot->frame(file, counted.read), counted.read, asBlurred, maker);
+      third = {out.companions.at("colour"), out.companions.at("glossy")};
+    }
+    return third;
+  };
+  const auto [colour, asColour] = run(0.5);
+  CHECK(asColour.pixels == colour.pixels);
+  const auto [same, lessHistory] = run(0.0);
+  REQUIRE(same.pixels == colour.pixels);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < colour.pixels.size(); ++i)
+    differ += lessHistory.pixels[i] != colour.pixels[i];
+  CHECK(differ > 0);
+  CHECK(differ < colour.pixels.size());
+}
