@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <string>
+#include <vector>
 
 #include "dn/io/buffer_io.h"
 #include "dn/io/frame_pattern.h"
@@ -78,6 +80,36 @@ DenoiseResult asBlurred(const std::string&, const FrameBuffers& frame) {
   DenoiseResult result;
   result.color = blurred(frame.get("color"));
   return result;
+}
+
+// Settings where no neighbour is brought to the frame's light first.
+temporal::SequenceSettings withoutRelighting() {
+  temporal::SequenceSettings settings;
+  settings.filter.changedLightSpread = settings.filter.changedLightMean = 1e9;
+  settings.filter.driftThreshold = 0.0;
+  return settings;
+}
+
+// Companions of the colour's images under `names`, denoised (blurred) as the
+// colour is, alone and accumulated; `viewDependent` names one that is.
+temporal::CompanionMaker blurredCompanions(std::vector<std::string> names,
+                                           const std::string& viewDependent = "") {
+  temporal::CompanionMaker maker;
+  maker.make = [names, viewDependent](const std::string&, const FrameBuffers& frame) {
+    temporal::Companions companions;
+    for (const std::string& name : names) {
+      companions[name].image = blurred(frame.get("color"));
+      companions[name].render = frame.get("color");
+      companions[name].viewDependent = name == viewDependent;
+    }
+    return companions;
+  };
+  maker.denoiseAccumulated = [](const FrameBuffers&, const std::map<std::string, Image>& renders) {
+    std::map<std::string, Image> out;
+    for (const auto& [name, render] : renders) out[name] = blurred(render);
+    return out;
+  };
+  return maker;
 }
 
 }  // namespace
@@ -261,24 +293,10 @@ TEST_CASE("a companion made as the colour is filtered, accumulated and averaged 
   // step, its past histories' mean included, so it comes out as the colour.
   // (A neighbour brought to the frame's light first brings each image by its
   // own factor, and the colour's history by its result's: none is here.)
-  temporal::SequenceSettings settings;
-  settings.filter.changedLightSpread = settings.filter.changedLightMean = 1e9;
-  settings.filter.driftThreshold = 0.0;
   CountedShot counted;
-  auto shot = counted.plan(settings);
+  auto shot = counted.plan(withoutRelighting());
   REQUIRE(shot);
-  temporal::CompanionMaker maker;
-  maker.make = [](const std::string&, const FrameBuffers& frame) {
-    temporal::Companions companions;
-    companions["colour"].image = blurred(frame.get("color"));
-    companions["colour"].render = frame.get("color");
-    return companions;
-  };
-  maker.denoiseAccumulated = [](const FrameBuffers&, const std::map<std::string, Image>& renders) {
-    std::map<std::string, Image> out;
-    for (const auto& [name, render] : renders) out[name] = blurred(render);
-    return out;
-  };
+  const temporal::CompanionMaker maker = blurredCompanions({"colour"});
   int averaged = 0;
   for (const auto& file : counted.files) {
     CAPTURE(file);
@@ -299,31 +317,14 @@ TEST_CASE("a view-dependent companion's history share follows what its render ga
   // the colour; with none where its render gathered one frame, it differs
   // where it gathered under two, but not where it gathered two or more.
   auto run = [](double alone) {
-    temporal::SequenceSettings settings;
-    settings.filter.changedLightSpread = settings.filter.changedLightMean = 1e9;
-    settings.filter.driftThreshold = 0.0;
+    temporal::SequenceSettings settings = withoutRelighting();
     settings.filter.viewDependentMotion = 0.0;
     settings.filter.accumulatedShare = 0.5;
     settings.filter.viewDependentShareAlone = alone;
     CountedShot counted;
     auto shot = counted.plan(settings);
     REQUIRE(shot);
-    temporal::CompanionMaker maker;
-    maker.make = [](const std::string&, const FrameBuffers& frame) {
-      temporal::Companions companions;
-      for (const char* name : {"colour", "glossy"}) {
-        companions[name].image = blurred(frame.get("color"));
-        companions[name].render = frame.get("color");
-      }
-      companions["glossy"].viewDependent = true;
-      return companions;
-    };
-    maker.denoiseAccumulated = [](const FrameBuffers&,
-                                  const std::map<std::string, Image>& renders) {
-      std::map<std::string, Image> out;
-      for (const auto& [name, render] : renders) out[name] = blurred(render);
-      return out;
-    };
+    const temporal::CompanionMaker maker = blurredCompanions({"colour", "glossy"}, "glossy");
     std::pair<Image, Image> third;  // the colour's and the glossy companion's
     for (int n = 0; n < 3; ++n) {
       const std::string& file = counted.files[n];
