@@ -26,13 +26,15 @@ constexpr std::size_t kMinCachedBlock = std::size_t(1) << 20;
 // The block's length sits in front of its data, so that a raw pointer can be
 // freed (Allocator::raw_deleter) and the data stays 64-byte aligned.
 constexpr std::size_t kHeader = 64;
-// Large blocks are whole huge pages: a 1080p network's activations otherwise
-// fault in 4 KiB at a time, which was a fifth of -q fast's CPU time.
-constexpr std::size_t kHugePage = std::size_t(2) << 20;
+// Tensors' blocks are whole 2 MiB granules, so that the few sizes a network
+// asks for fit each other's free ranges. The arena is not advised into
+// transparent huge pages: on the development machines a fresh huge page cost
+// more than the small pages it replaces, and a 1080p still took 1.46x the
+// time with them (docs/RESULTS.md, "Transparent huge pages").
+constexpr std::size_t kLargeGranule = std::size_t(2) << 20;
 // Operator new's blocks are whole 64 KiB: they hold images, many of them for
-// long (a sequence's window), and whole huge pages would add up to 2 MiB to
-// each (a 1080p frame's 4.2 MiB depth took 6). The arena's huge pages are
-// the kernel's to place, whatever the blocks in them.
+// long (a sequence's window), and whole 2 MiB granules would add up to 2 MiB
+// to each (a 1080p frame's 4.2 MiB depth took 6).
 constexpr std::size_t kNewGranule = std::size_t(64) << 10;
 // Addresses reserved for large blocks; only what is touched takes memory.
 // Under a limit on the address space (ulimit -v, as some farms set) half of
@@ -41,14 +43,14 @@ std::size_t arenaBytes() {
   std::size_t bytes = std::size_t(256) << 30;
   rlimit limit{};
   if (getrlimit(RLIMIT_AS, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
-    bytes = std::min<std::size_t>(bytes, limit.rlim_cur / 2 / kHugePage * kHugePage);
+    bytes = std::min<std::size_t>(bytes, limit.rlim_cur / 2 / kLargeGranule * kLargeGranule);
   return bytes;
 }
 
 std::size_t roundUp(std::size_t n, std::size_t to) { return (n + to - 1) / to * to; }
 
-void* allocHuge(std::size_t bytes) {
-  void* block = std::aligned_alloc(kHugePage, roundUp(bytes, kHugePage));
+void* allocLarge(std::size_t bytes) {
+  void* block = std::aligned_alloc(kLargeGranule, roundUp(bytes, kLargeGranule));
   if (!block) throw std::bad_alloc();
   return block;
 }
@@ -106,22 +108,20 @@ class ReusingCpuAllocator final : public c10::Allocator {
 
   ReusingCpuAllocator() : size_(arenaBytes()) {
     if (size_ == 0) return;
-    void* reserved = mmap(nullptr, size_ + kHugePage, PROT_READ | PROT_WRITE,
+    void* reserved = mmap(nullptr, size_ + kLargeGranule, PROT_READ | PROT_WRITE,
                           MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
     if (reserved == MAP_FAILED) return;
-    base_ = reinterpret_cast<char*>(roundUp(reinterpret_cast<std::uintptr_t>(reserved), kHugePage));
-#ifdef MADV_HUGEPAGE
-    madvise(base_, size_, MADV_HUGEPAGE);  // advice only: ignored where unsupported
-#endif
+    base_ =
+        reinterpret_cast<char*>(roundUp(reinterpret_cast<std::uintptr_t>(reserved), kLargeGranule));
   }
 
   bool inArena(const char* block) const { return base_ && block >= base_ && block < base_ + size_; }
 
   void* take(std::size_t bytes) {
     if (bytes >= kMinCachedBlock)
-      if (void* data = takeFromArena(bytes, kHugePage)) return data;
-    char* block = static_cast<char*>(bytes >= kHugePage ? allocHuge(bytes + kHeader)
-                                                        : c10::alloc_cpu(bytes + kHeader));
+      if (void* data = takeFromArena(bytes, kLargeGranule)) return data;
+    char* block = static_cast<char*>(bytes >= kLargeGranule ? allocLarge(bytes + kHeader)
+                                                            : c10::alloc_cpu(bytes + kHeader));
     *reinterpret_cast<std::size_t*>(block) = bytes + kHeader;
     return block + kHeader;
   }
@@ -236,14 +236,14 @@ class ReusingCpuAllocator final : public c10::Allocator {
     free_.erase(it);
   }
 
-  // Gives up to `bytes` (whole huge pages) of memory back to the kernel from
+  // Gives up to `bytes` (whole granules) of memory back to the kernel from
   // the end of the highest cached range starting below `below`, as a heap
   // trims its top: the cache left stays in long ranges low in the arena.
   void dropCached(std::size_t bytes, std::size_t below = SIZE_MAX) {
     auto highest = std::make_reverse_iterator(free_.lower_bound(below));
     while (!highest->second.cached) ++highest;
     const std::size_t offset = highest->first, length = highest->second.length;
-    const std::size_t dropped = std::min(length, roundUp(bytes, kHugePage));
+    const std::size_t dropped = std::min(length, roundUp(bytes, kLargeGranule));
     const std::size_t kept = length - dropped;
     removeFree(offset);
     if (kept > 0) addFree(offset, {kept, true});
@@ -255,7 +255,7 @@ class ReusingCpuAllocator final : public c10::Allocator {
   }
 
   const std::size_t size_;             // of the reserved range
-  char* base_ = nullptr;               // the reserved range, huge-page aligned; null if none
+  char* base_ = nullptr;               // the reserved range, granule-aligned; null if none
   std::size_t top_ = 0;                // offsets from here on were never handed out, or given back
   std::map<std::size_t, Range> free_;  // by offset
   BySize cachedBySize_, idleBySize_;
