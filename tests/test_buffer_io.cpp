@@ -353,7 +353,8 @@ TEST_CASE("kept layers are written as stored: half and float channels bit for bi
 }
 
 TEST_CASE(
-    "channel groups read into a wider window are as OpenImageIO reads them, scanlines or tiles") {
+    "channel groups read into a wider window are as OpenImageIO reads them, scanlines or tiles, "
+    "a channel asked for twice in both places") {
   TempDir dir;
   const float zero = 0.0f;
   const int w = 7, h = 5;
@@ -376,10 +377,14 @@ TEST_CASE(
       REQUIRE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()));
       REQUIRE(out->close());
     }
-    // Channels out of the file's order, in a window one row and column wider each way.
+    // Channels out of the file's order, in a window one row and column wider
+    // each way; a sequence asks for the depth both as a buffer and as a guide.
     const PixelWindow window{spec.x - 1, spec.y - 1, w + 2, h + 2};
-    const std::vector<Image> read = readImages(
-        path, {{"ViewLayer.Vector.X", "ViewLayer.Combined.G"}, {"ViewLayer.Depth.Z"}}, window);
+    const std::vector<Image> read = readImages(path,
+                                               {{"ViewLayer.Vector.X", "ViewLayer.Combined.G"},
+                                                {"ViewLayer.Depth.Z"},
+                                                {"ViewLayer.Depth.Z"}},
+                                               window);
     auto reference = [&](const std::string& name) {  // OpenImageIO's own read of one channel
       auto in = OIIO::ImageInput::open(path);
       REQUIRE(in);
@@ -388,10 +393,12 @@ TEST_CASE(
       REQUIRE(in->read_image(0, 0, c, c + 1, OIIO::TypeDesc::FLOAT, values.data()));
       return values;
     };
-    const std::vector<std::pair<const float*, int>> wanted = {
-        {&read[0].pixels[0], 2}, {&read[0].pixels[1], 2}, {&read[1].pixels[0], 1}};
+    const std::vector<std::pair<const float*, int>> wanted = {{&read[0].pixels[0], 2},
+                                                              {&read[0].pixels[1], 2},
+                                                              {&read[1].pixels[0], 1},
+                                                              {&read[2].pixels[0], 1}};
     const std::vector<std::string> names = {"ViewLayer.Vector.X", "ViewLayer.Combined.G",
-                                            "ViewLayer.Depth.Z"};
+                                            "ViewLayer.Depth.Z", "ViewLayer.Depth.Z"};
     for (std::size_t k = 0; k < names.size(); ++k) {
       CAPTURE(names[k]);
       const std::vector<float> expected = reference(names[k]);
