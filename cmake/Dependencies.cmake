@@ -11,7 +11,7 @@ if(DN_WITH_OIIO)
   pkg_check_modules(OIIO REQUIRED IMPORTED_TARGET OpenImageIO)
   pkg_check_modules(OCIO REQUIRED IMPORTED_TARGET OpenColorIO)
   pkg_check_modules(IMATH REQUIRED IMPORTED_TARGET Imath)  # half floats (OpenEXR's own)
-  pkg_check_modules(OPENEXR REQUIRED IMPORTED_TARGET OpenEXR)  # a sequence's channels by name
+  pkg_check_modules(OPENEXR REQUIRED IMPORTED_TARGET OpenEXR)  # channels read by name
 endif()
 
 if(DN_BUILD_TESTS)
