@@ -43,7 +43,8 @@ PSNR (Reinhard) against the reference's same pass, flicker of the error
 (mean over frames of mean |e_t - e_t-1|, e = R(denoised) - R(reference), R
 Reinhard's x / (1 + x)) and its ratio to fbf's, the passes' recombination
 error against each method's own denoised beauty, the regrade (glossy x 1.5,
-recombined) against the reference regraded the same way, and each dndenoise
+recombined) against the reference regraded the same way, the method's
+denoised beauty against the reference's ("beauty"), and each dndenoise
 run's wall time (whole process).
 
   python3 experiments/passes_eval.py --shots SHOT... [--spp 4] [--window 4]
@@ -363,13 +364,16 @@ def sequence_frame(args, shot, spp, method, n, oidn):
 
 
 def sequence_scores(frames_out, frames_ref, terms):
-    """Per pass key (and "regrade"): PSNR per frame, flicker of the error; the recombination error."""
+    """Per pass key (and "regrade", "beauty"): PSNR per frame, flicker of the error; the recombination error."""
     keys = [k for k in frames_ref[0][0] if k in frames_out[0][0]]
     scores = {}
-    for key in keys + ["regrade"]:
+    for key in keys + ["regrade", "beauty"]:
         outs, refs = [], []
-        for (passes, _), (ref_passes, _) in zip(frames_out, frames_ref):
-            if key == "regrade":
+        for (passes, beauty), (ref_passes, ref_beauty) in zip(frames_out, frames_ref):
+            if key == "beauty":
+                outs.append(beauty)
+                refs.append(ref_beauty)
+            elif key == "regrade":
                 outs.append(recombine(terms, regraded(passes), passes["residual"]))
                 refs.append(recombine(terms, regraded(ref_passes), ref_passes["residual"]))
             else:
