@@ -607,16 +607,20 @@ TEST_CASE("temporal filter: the two estimates blend by the accumulated share") {
                   std::invalid_argument);
 }
 
-TEST_CASE("a view-dependent pass's history share follows the frames its render gathered") {
+TEST_CASE("a light pass's history share follows the frames its render gathered") {
   temporal::TemporalOptions options;
-  options.accumulatedShare = 0.35, options.viewDependentShareAlone = 0.2;
+  options.accumulatedShare = 0.35;
   Image frames(4, 1, 1);
   frames.pixels = {1.0f, 1.5f, 2.0f, 7.0f};
-  const Image share = temporal::viewDependentShare(frames, options);
+  const Image share = temporal::passHistoryShare(frames, 0.2, options);
   CHECK(share.pixels[0] == doctest::Approx(0.2));
   CHECK(share.pixels[1] == doctest::Approx(0.275));
   CHECK(share.pixels[2] == doctest::Approx(0.35));
   CHECK(share.pixels[3] == doctest::Approx(0.35));
+  // None where nothing was gathered; never above the colour's share.
+  CHECK(temporal::passHistoryShare(frames, 0.0, options).pixels[0] == 0.0f);
+  CHECK(temporal::passHistoryShare(frames, 0.0, options).pixels[1] == doctest::Approx(0.175));
+  CHECK(temporal::passHistoryShare(frames, 0.9, options).pixels[0] == doctest::Approx(0.35));
 }
 
 TEST_CASE("temporal filter: the past frames' denoised histories average with the frame's own") {

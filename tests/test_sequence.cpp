@@ -8,6 +8,7 @@
 #include <cmath>
 #include <map>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "dn/io/buffer_io.h"
@@ -292,9 +293,13 @@ TEST_CASE("a companion made as the colour is filtered, accumulated and averaged 
   // colour is, alone and accumulated, takes the colour's weights at every
   // step, its past histories' mean included, so it comes out as the colour.
   // (A neighbour brought to the frame's light first brings each image by its
-  // own factor, and the colour's history by its result's: none is here.)
+  // own factor, and the colour's history by its result's: none is here.) It
+  // takes the colour's share of its history wherever its render gathered less
+  // (a half: a float per pixel as exact as the colour's double).
+  temporal::SequenceSettings settings = withoutRelighting();
+  settings.filter.accumulatedShare = settings.filter.lightShareAlone = 0.5;
   CountedShot counted;
-  auto shot = counted.plan(withoutRelighting());
+  auto shot = counted.plan(settings);
   REQUIRE(shot);
   const temporal::CompanionMaker maker = blurredCompanions({"colour"});
   int averaged = 0;
@@ -311,36 +316,46 @@ TEST_CASE("a companion made as the colour is filtered, accumulated and averaged 
   CHECK(averaged >= 4);
 }
 
-TEST_CASE("a view-dependent companion's history share follows what its render gathered") {
+TEST_CASE("a light companion's history share follows what its render gathered") {
   // As above, the view-dependent gate off so that the glossy companion takes
-  // the colour's weights: at the colour's share everywhere it comes out as
-  // the colour; with none where its render gathered one frame, it differs
-  // where it gathered under two, but not where it gathered two or more.
-  auto run = [](double alone) {
+  // the colour's weights: at the colour's share everywhere both come out as
+  // the colour; with none where its render gathered one frame, a companion
+  // differs where it gathered under two, but not where it gathered two or more.
+  auto run = [](double lightAlone, double viewDependentAlone) {
     temporal::SequenceSettings settings = withoutRelighting();
     settings.filter.viewDependentMotion = 0.0;
     settings.filter.accumulatedShare = 0.5;
-    settings.filter.viewDependentShareAlone = alone;
+    settings.filter.lightShareAlone = lightAlone;
+    settings.filter.viewDependentShareAlone = viewDependentAlone;
     CountedShot counted;
     auto shot = counted.plan(settings);
     REQUIRE(shot);
-    const temporal::CompanionMaker maker = blurredCompanions({"colour", "glossy"}, "glossy");
-    std::pair<Image, Image> third;  // the colour's and the glossy companion's
+    const temporal::CompanionMaker maker =
+        blurredCompanions({"colour", "diffuse", "glossy"}, "glossy");
+    std::map<std::string, Image> third;
     for (int n = 0; n < 3; ++n) {
       const std::string& file = counted.files[n];
-      auto out =
-          shot->denoise(file, shot->frame(file, counted.read), counted.read, asBlurred, maker);
-      third = {out.companions.at("colour"), out.companions.at("glossy")};
+      third = shot->denoise(file, shot->frame(file, counted.read), counted.read, asBlurred, maker)
+                  .companions;
     }
     return third;
   };
-  const auto [colour, asColour] = run(0.5);
-  CHECK(asColour.pixels == colour.pixels);
-  const auto [same, lessHistory] = run(0.0);
-  REQUIRE(same.pixels == colour.pixels);
-  std::size_t differ = 0;
-  for (std::size_t i = 0; i < colour.pixels.size(); ++i)
-    differ += lessHistory.pixels[i] != colour.pixels[i];
-  CHECK(differ > 0);
-  CHECK(differ < colour.pixels.size());
+  auto differing = [](const Image& a, const Image& b) {
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.pixels.size(); ++i) differ += a.pixels[i] != b.pixels[i];
+    return differ;
+  };
+  const auto full = run(0.5, 0.5);
+  const Image& colour = full.at("colour");
+  CHECK(full.at("diffuse").pixels == colour.pixels);
+  CHECK(full.at("glossy").pixels == colour.pixels);
+  for (const auto& [light, viewDependent, changed, kept] :
+       {std::tuple{0.0, 0.5, "diffuse", "glossy"}, std::tuple{0.5, 0.0, "glossy", "diffuse"}}) {
+    CAPTURE(changed);
+    const auto less = run(light, viewDependent);
+    CHECK(less.at(kept).pixels == colour.pixels);
+    const std::size_t differ = differing(less.at(changed), colour);
+    CHECK(differ > 0);
+    CHECK(differ < colour.pixels.size());
+  }
 }

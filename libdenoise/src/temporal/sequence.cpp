@@ -546,9 +546,10 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
     out.filtered[name] = filterWith(weights, images, still);
     if (accumulate && !own.render.empty()) {
       Image frames;
-      out.accumulated[name] =
-          accumulateWith(weights, renders, images, still, own.viewDependent ? &frames : nullptr);
-      if (own.viewDependent) out.historyShare[name] = viewDependentShare(frames, settings_.filter);
+      out.accumulated[name] = accumulateWith(weights, renders, images, still, &frames);
+      const TemporalOptions& o = settings_.filter;
+      out.historyShare[name] = passHistoryShare(
+          frames, own.viewDependent ? o.viewDependentShareAlone : o.lightShareAlone, o);
     }
   }
   return out;
@@ -670,10 +671,7 @@ Sequence::WithCompanions Sequence::denoiseFrame(const std::string& file, const F
     for (const auto& [name, own] : companionHistories(n, given, passes, companions)) {
       Image& pass = passes.filtered.at(name);
       const Image history = companionHistoryMean(n, name, own, pastHistories);
-      auto perPixel = passes.historyShare.find(name);
-      pass = perPixel != passes.historyShare.end()
-                 ? blendWithHistory(pass, history, perPixel->second)
-                 : blendWithHistory(pass, history, share);
+      pass = blendWithHistory(pass, history, passes.historyShare.at(name));
     }
   out.companions = std::move(passes.filtered);
   return out;

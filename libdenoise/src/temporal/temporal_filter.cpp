@@ -1086,9 +1086,9 @@ Image historyMean(const Image& own, const TemporalResult& result, const Temporal
   return out;
 }
 
-Image viewDependentShare(const Image& frames, const TemporalOptions& options) {
+Image passHistoryShare(const Image& frames, double alone, const TemporalOptions& options) {
   const double full = options.accumulatedShare;
-  const double alone = std::min(options.viewDependentShareAlone, full);
+  alone = std::min(alone, full);
   Image out = frames;
   for (float& f : out.pixels)
     f = static_cast<float>(alone + (full - alone) * std::clamp(f - 1.0, 0.0, 1.0));

@@ -203,7 +203,7 @@ class Sequence {
   // accumulated (by name).
   struct FilteredCompanions {
     std::map<std::string, Image> filtered, accumulated;
-    std::map<std::string, Image> historyShare;  // per pixel, the view-dependent ones'
+    std::map<std::string, Image> historyShare;  // per pixel, of those accumulated
   };
   FilteredCompanions filteredCompanions(int number, const FilterWeights& weights,
                                         const CompanionMaker& make, bool accumulate);

@@ -156,14 +156,16 @@ struct TemporalOptions {
   // denoising the default-size network on the prefilter's aux): 0.3 to 0.4
   // within 0.02 dB at 4 and 16 spp, 0.5 0.04-0.07 dB less, 0.6 0.1-0.16 less.
   double accumulatedShare = 0.35;
-  // A view-dependent light pass's share where its render gathered nothing
-  // (where it moved on screen), rising to accumulatedShare at two frames:
-  // there its history is only a smaller network's second opinion of the same
-  // render, which the glossy passes gain less from than the colour does.
-  // Chosen on the tuning half of experiments/shots/SPLIT_1080.md: at 15 % a
+  // A light pass's share where its render gathered nothing, rising to
+  // accumulatedShare at two frames: there its history is only a smaller
+  // network's second opinion of the same render. The view-dependent passes
+  // (glossy, transmission; where they moved on screen) gain from it; at 15 % a
   // turning metal bottle's residual, at 25 % its Glossy Direct, fell below
-  // the pass alone.
+  // the pass alone. The others (diffuse) gain as often as they lose, and at
+  // 35 % two rolling balls' Diffuse Direct and Indirect lost 0.3 dB to the
+  // passes alone. Chosen on the tuning side of experiments/shots/SPLIT_1080.md.
   double viewDependentShareAlone = 0.2;
+  double lightShareAlone = 0.0;
   // The past frames' denoised histories count where the surface stood still
   // on screen, fully, falling to nothing at this many pixels of motion. Where
   // it moved, each was resampled on its way in and its errors follow the
@@ -307,11 +309,11 @@ FilterWeights pastWeights(const FilterWeights& taps, const std::vector<std::size
 // neighbour was trusted the history is the frame's own render, so both are
 // the frame denoised alone.
 Image blendWithHistory(const Image& filtered, const Image& accumulated, double share);
-// A view-dependent light pass's share of its history per pixel, from the
-// effective frames its render accumulated (accumulateWith's `frames`):
-// TemporalOptions::viewDependentShareAlone (at most accumulatedShare) at one
-// frame, rising linearly to accumulatedShare at two.
-Image viewDependentShare(const Image& frames, const TemporalOptions& options);
+// A light pass's share of its history per pixel, from the effective frames
+// its render accumulated (accumulateWith's `frames`): `alone` (at most
+// TemporalOptions::accumulatedShare; viewDependentShareAlone or
+// lightShareAlone) at one frame, rising linearly to accumulatedShare at two.
+Image passHistoryShare(const Image& frames, double alone, const TemporalOptions& options);
 // blendWithHistory with a share per pixel (a one-channel image).
 Image blendWithHistory(const Image& filtered, const Image& accumulated, const Image& share);
 
