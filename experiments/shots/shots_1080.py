@@ -559,7 +559,7 @@ def truck_turntable():
     turntable((0, 0.3, 0), 0.6, material("disc", (0.3, 0.3, 0.32), 0.5, "checker", 12.0),
               [model("CesiumMilkTruck", 1.0, (0, 0, 0.04), 0.3)], 0.07)
     camera((-0.4, -2.2, 1.0), (0.0, 0.3, 0.3), 50)
-    return Vector((0.1, 0.1, 0.35))
+    return Vector((-0.12, 0.1, 0.3))  # the body side, its logo
 
 
 def sofa_turn():
