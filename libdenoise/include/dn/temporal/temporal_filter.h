@@ -161,9 +161,10 @@ struct TemporalOptions {
   // network's second opinion of the same render. The view-dependent passes
   // (glossy, transmission; where they moved on screen) gain from it; at 15 % a
   // turning metal bottle's residual, at 25 % its Glossy Direct, fell below
-  // the pass alone. The others (diffuse) gain as often as they lose, and at
-  // 35 % two rolling balls' Diffuse Direct and Indirect lost 0.3 dB to the
-  // passes alone. Chosen on the tuning side of experiments/shots/SPLIT_1080.md.
+  // the pass alone. The others (diffuse) gain on some shots and lose on
+  // others: at 35 % two rolling balls' Diffuse Direct and Indirect lost 0.3 dB
+  // to the passes alone. Chosen on the tuning side of
+  // experiments/shots/SPLIT_1080.md.
   double viewDependentShareAlone = 0.2;
   double lightShareAlone = 0.0;
   // The past frames' denoised histories count where the surface stood still
