@@ -79,6 +79,10 @@ SHOTS = {
     "sofa_turn":     (384, True),
     "car_turn":      (384, True),
     "crates_dolly":  (384, True),
+    # a fifth held-out set (SPLIT_1080.md)
+    "ball_roll":     (384, True),
+    "cubes_turn":    (384, True),
+    "bench_dolly":   (384, True),
 }
 
 
@@ -602,6 +606,61 @@ def crates_dolly():
     drive(cam, "location", 0, "-0.8 + 0.03 * frame")
     drive(aim, "location", 0, "-0.2 + 0.02 * frame")
     return Vector((-0.1, 1.3, 0.45))
+
+
+def ball_roll():
+    """A painted wooden ball rolling slowly across flagstones before a plaster wall
+    under a low sun (courtyard HDRI); locked off: its grain follows the motion
+    vectors while its shading and shadow stay where the sun puts them."""
+    world_hdri("courtyard", 0.5, 2.0)
+    light("SUN", "sun", (0, 0, 10), 4.0, 1.0, (math.radians(55), 0, math.radians(80)))
+    box("ground", (0, 0, -0.05), (8, 8, 0.1), material("flags", (0.5, 0.47, 0.42), 0.8, "brick", 4.0))
+    box("wall", (0, 1.2, 1.0), (8, 0.3, 2.0), material("plaster", (0.75, 0.7, 0.6), 0.9, "noise", 12.0))
+    ball = sphere("ball", (0, 0, 0.2), 0.2, material("ball", (0.6, 0.35, 0.2), 0.6, "wood", 6.0))
+    drive(ball, "location", 0, "-0.04 + 0.01 * frame")
+    drive(ball, "rotation_euler", 1, "0.05 * frame")  # rolling: 0.01 m over a 0.2 m radius
+    camera((0.0, -2.0, 0.7), (0.0, 0.2, 0.2), 50)
+    return on(ball, (-0.12, -0.14, 0.04))  # its face, across the terminator of the sun's light
+
+
+def cubes_turn():
+    """Three painted wooden cubes turning in place, each at its own pace, on a
+    table under a warm area lamp in a dim room (interior HDRI); locked off:
+    matte faces brightening and darkening as they turn to and from the lamp."""
+    world_hdri("interior", 0.3, 0.5)
+    light("AREA", "lamp", (1.0, -0.8, 1.4), 60.0, 0.4, (math.radians(50), 0, math.radians(50)),
+          (1.0, 0.85, 0.65))
+    box("table", (0, 0.2, -0.02), (2.0, 1.2, 0.04), material("linen", (0.6, 0.58, 0.52), 0.9, "noise", 40.0))
+    box("wall", (0, 0.9, 0.8), (4, 0.1, 1.6), material("paint", (0.4, 0.45, 0.5), 0.9, "noise", 10.0))
+    paints = ((0.7, 0.2, 0.15), (0.85, 0.75, 0.3), (0.2, 0.4, 0.65))
+    cubes = []
+    for i, (x, colour) in enumerate(zip((-0.22, 0.0, 0.22), paints)):
+        cube = box("cube%d" % i, (x, 0.2, 0.06), (0.12, 0.12, 0.12), material("paint%d" % i, colour, 0.6, "wood", 14.0))
+        drive(cube, "rotation_euler", 2, "%g * frame + %g" % (0.05 + 0.02 * i, 0.4 * i))
+        cubes.append(cube)
+    camera((0.2, -2.3, 0.9), (0.0, 0.2, 0.06), 50)
+    return on(cubes[1], (0.0, 0.0, 0.02))
+
+
+def bench_dolly():
+    """A slatted garden bench before a rough stone wall in dappled sun (forest HDRI,
+    sun); the camera dollies past: diffuse light and slat shadows, moving with the
+    view, lit the same on every frame."""
+    world_hdri("forest", 0.8, 1.0)
+    light("SUN", "sun", (0, 0, 10), 3.5, 1.5, (math.radians(40), 0, math.radians(-30)))
+    box("ground", (0, 0.5, -0.05), (10, 8, 0.1), material("gravel", (0.45, 0.43, 0.4), 0.9, "noise", 80.0))
+    box("wall", (0, 1.0, 1.0), (10, 0.3, 2.0), material("stone", (0.55, 0.52, 0.47), 0.9, "brick", 3.0))
+    slat = material("slat", (0.5, 0.37, 0.25), 0.75, "wood", 10.0)
+    for i in range(5):
+        box("seat%d" % i, (0, 0.45 + 0.07 * i, 0.45), (1.4, 0.05, 0.03), slat)
+    for i in range(3):
+        box("back%d" % i, (0, 0.75, 0.6 + 0.1 * i), (1.4, 0.03, 0.06), slat)
+    for x in (-0.6, 0.6):
+        box("leg%d" % (x > 0), (x, 0.6, 0.22), (0.06, 0.36, 0.44), slat)
+    cam, aim = camera((-0.6, -1.6, 1.0), (-0.2, 0.6, 0.45), 45)
+    drive(cam, "location", 0, "-0.6 + 0.025 * frame")
+    drive(aim, "location", 0, "-0.2 + 0.02 * frame")
+    return Vector((-0.1, 0.55, 0.46))  # the seat's front edge, slat shadows on the wall behind
 
 
 # ---------------------------------------------------------------- framing and rendering
