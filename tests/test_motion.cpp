@@ -493,6 +493,12 @@ std::vector<const temporal::WindowFrame*> windowOf(
   return window;
 }
 
+std::vector<const Image*> pointersTo(const std::vector<Image>& images) {
+  std::vector<const Image*> out;
+  for (const Image& image : images) out.push_back(&image);
+  return out;
+}
+
 double meanSquaredError(const Image& a, const Image& b) {
   double s = 0.0;
   for (std::size_t i = 0; i < a.pixels.size(); ++i) s += std::pow(a.pixels[i] - b.pixels[i], 2);
@@ -871,6 +877,65 @@ TEST_CASE("temporal filter: a light drifting over part of the frame is brought t
   for (int x = 0; x < 96; ++x) CHECK(passDrifted.at(x, 60, 1) == passKept.at(x, 60, 1));
 }
 
+TEST_CASE("a diffuse pass takes a drifted neighbour only where its own renders agree") {
+  const Synthetic truth = makeFrame(96, 64, 0, 0);
+  const std::vector<temporal::WindowFrame> frames = driftingShot(truth, 0.03f);
+  temporal::TemporalOptions options;
+  options.driftBox = 7;
+  options.radius = 2;
+  const temporal::TemporalResult r = temporal::filterFrame(windowOf(frames), 4, options);
+  REQUIRE(r.stats.drifted == 1);
+  // A pass of half the light; in the drifted neighbour its bottom half (where
+  // the colour's light held) lost 30 %, another pass making up for it.
+  std::vector<Image> pass, render;
+  for (const auto& f : frames) {
+    pass.push_back(f.denoised.floats()), render.push_back(f.noisy.floats());
+    for (Image* image : {&pass.back(), &render.back()})
+      for (float& v : image->pixels) v *= 0.5f;
+  }
+  std::size_t drifted = 0, steady = 0;
+  for (std::size_t k = 0; k < r.weights.neighbours.size(); ++k)
+    (r.weights.neighbours[k].drifted.empty() ? steady : drifted) = k;
+  const temporal::NeighbourWeights& nb = r.weights.neighbours[drifted];
+  for (Image* image : {&pass[nb.frame], &render[nb.frame]})
+    for (int y = 32; y < 64; ++y)
+      for (int x = 0; x < 96; ++x)
+        for (int c = 0; c < 3; ++c) image->at(x, y, c) *= 0.7f;
+  const temporal::TestedWeights tested =
+      temporal::passLightTested(r.weights, pointersTo(render), pointersTo(pass), options);
+  REQUIRE(tested.size() == r.weights.neighbours.size());
+  CHECK(tested[steady].empty());  // its light held: the colour's weights serve
+  // The drifted one keeps its weights where the pass agrees, loses them where it changed.
+  // (Rows 27-37: the light test's 11x11 boxes see both halves.)
+  int keptTop = 0, takenTop = 0, takenBottom = 0;
+  double weightBottom = 0.0, testedBottom = 0.0;
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 96; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * 96 + x;
+      if (nb.weight[i] <= 0.0) continue;
+      CHECK(tested[drifted][i] <= nb.weight[i]);
+      if (y < 27) takenTop += 1, keptTop += tested[drifted][i] == nb.weight[i];
+      if (y < 38) continue;
+      takenBottom += 1, weightBottom += nb.weight[i], testedBottom += tested[drifted][i];
+    }
+  CHECK(keptTop > 0.9 * takenTop);
+  CHECK(takenBottom > 0.9 * 96 * 26);
+  CHECK(testedBottom < 0.01 * weightBottom);
+  // Filtered with them, the pass's bottom half is the frame's own light, not darker.
+  const Image untested = temporal::filterWith(r.weights, pointersTo(pass));
+  const Image filtered = temporal::filterWith(r.weights, pointersTo(pass), 0.0, &tested);
+  double own = 0.0, before = 0.0, after = 0.0;
+  for (int y = 40; y < 64; ++y)
+    for (int x = 0; x < 96; ++x)
+      own += pass[4].at(x, y, 1), before += untested.at(x, y, 1), after += filtered.at(x, y, 1);
+  CHECK(before / own < 0.95);
+  CHECK(after / own == doctest::Approx(1.0).epsilon(0.01));
+  // Without a drifted neighbour, or with the test off, there is nothing to test.
+  options.passLightHigh = 0.0;
+  CHECK(
+      temporal::passLightTested(r.weights, pointersTo(render), pointersTo(pass), options).empty());
+}
+
 TEST_CASE("temporal filter: a change of light relighting cannot undo leaves the neighbour out") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 3, 510, 610);
@@ -1065,12 +1130,6 @@ std::vector<Image> stillPass(const Synthetic& truth, unsigned count, float share
     out.push_back(stillFrame(truth, seed + t, seed + 100 + t).denoised.floats());
     for (float& v : out.back().pixels) v *= share;
   }
-  return out;
-}
-
-std::vector<const Image*> pointersTo(const std::vector<Image>& images) {
-  std::vector<const Image*> out;
-  for (const Image& image : images) out.push_back(&image);
   return out;
 }
 

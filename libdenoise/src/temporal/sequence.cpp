@@ -543,10 +543,13 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
       continue;
     }
     const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;
-    out.filtered[name] = filterWith(weights, images, still);
+    const TestedWeights tested = own.viewDependent || own.render.empty()
+                                     ? TestedWeights()
+                                     : passLightTested(weights, renders, images, settings_.filter);
+    out.filtered[name] = filterWith(weights, images, still, &tested);
     if (accumulate && !own.render.empty()) {
       Image frames;
-      out.accumulated[name] = accumulateWith(weights, renders, images, still, &frames);
+      out.accumulated[name] = accumulateWith(weights, renders, images, still, &frames, &tested);
       const TemporalOptions& o = settings_.filter;
       out.historyShare[name] = passHistoryShare(
           frames, own.viewDependent ? o.viewDependentShareAlone : o.lightShareAlone, o);

@@ -964,7 +964,8 @@ Image effectiveFrames(const Image& own, const std::vector<Weighted>& others) {
 // and accumulateWith document.
 Image combineOver(const char* caller, const FilterWeights& weights,
                   const std::vector<const Image*>& images, const std::vector<const Image*>& lightOf,
-                  double stillPixels, bool nearest, Image* frames = nullptr) {
+                  double stillPixels, bool nearest, const TestedWeights* tested,
+                  Image* frames = nullptr) {
   auto at = [](const std::vector<const Image*>& v, std::size_t k) {
     return k < v.size() ? v[k] : nullptr;
   };
@@ -978,13 +979,16 @@ Image combineOver(const char* caller, const FilterWeights& weights,
   moved.reserve(weights.neighbours.size());
   gated.reserve(2 * weights.neighbours.size());
   std::vector<Weighted> others;
-  for (const NeighbourWeights& nb : weights.neighbours) {
+  for (std::size_t k = 0; k < weights.neighbours.size(); ++k) {
+    const NeighbourWeights& nb = weights.neighbours[k];
     const Image* image = at(images, nb.frame);
     const Image* light = at(lightOf, nb.frame);
     if (!image || !image->sameShape(*own) || !light || !light->sameShape(*ownLight)) continue;
-    const std::vector<double>* weight = &nb.weight;
+    const std::vector<double>& taken =
+        tested && k < tested->size() && !(*tested)[k].empty() ? (*tested)[k] : nb.weight;
+    const std::vector<double>* weight = &taken;
     if (stillPixels > 0.0) {
-      gated.push_back(nb.weight);
+      gated.push_back(taken);
       const Image still = stillness(nb.resampling.positions, stillPixels);
       for (std::size_t i = 0; i < gated.back().size(); ++i) gated.back()[i] *= still.pixels[i];
       weight = &gated.back();
@@ -999,7 +1003,7 @@ Image combineOver(const char* caller, const FilterWeights& weights,
           !nearest && image == light ? in : motion::resample(nb.resampling, *light);
       if (!nb.drifted.empty()) {
         in = scaled(std::move(in),
-                    driftFactor(lightIn, *ownLight, nb.weight, weights.driftBox, 0.0, &nb.drifted));
+                    driftFactor(lightIn, *ownLight, taken, weights.driftBox, 0.0, &nb.drifted));
       } else {
         const Image factor = relightFactor(lightIn, *ownLight, nb.resampling.trust,
                                            weights.relightBox, weights.relightRange);
@@ -1018,13 +1022,15 @@ Image combineOver(const char* caller, const FilterWeights& weights,
 }  // namespace
 
 Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
-                 double stillPixels) {
-  return combineOver("filterWith", weights, images, images, stillPixels, false);
+                 double stillPixels, const TestedWeights* tested) {
+  return combineOver("filterWith", weights, images, images, stillPixels, false, tested);
 }
 
 Image accumulateWith(const FilterWeights& weights, const std::vector<const Image*>& renders,
-                     const std::vector<const Image*>& results, double stillPixels, Image* frames) {
-  return combineOver("accumulateWith", weights, renders, results, stillPixels, true, frames);
+                     const std::vector<const Image*>& results, double stillPixels, Image* frames,
+                     const TestedWeights* tested) {
+  return combineOver("accumulateWith", weights, renders, results, stillPixels, true, tested,
+                     frames);
 }
 
 namespace {
@@ -1115,6 +1121,48 @@ Image blendWithHistory(const Image& filtered, const Image& accumulated, double s
   for (std::size_t i = 0; i < out.pixels.size(); ++i)
     out.pixels[i] =
         static_cast<float>((1.0 - share) * filtered.pixels[i] + share * accumulated.pixels[i]);
+  return out;
+}
+
+TestedWeights passLightTested(const FilterWeights& weights,
+                              const std::vector<const Image*>& renders,
+                              const std::vector<const Image*>& results,
+                              const TemporalOptions& options) {
+  auto at = [](const std::vector<const Image*>& v, std::size_t k) {
+    return k < v.size() ? v[k] : nullptr;
+  };
+  const Image* render = at(renders, weights.centre);
+  const Image* result = at(results, weights.centre);
+  auto drifted = [](const NeighbourWeights& nb) { return !nb.drifted.empty(); };
+  if (!render || !result || options.passLightHigh <= 0.0 ||
+      std::none_of(weights.neighbours.begin(), weights.neighbours.end(), drifted))
+    return {};
+  const double scale = tonemap::oidnExposure(*result);
+  const Image mapped = tonemapped(*render, scale);
+  const Image residual = difference(mapped, tonemapped(*result, scale));
+  TestedWeights out(weights.neighbours.size());
+  for (std::size_t k = 0; k < weights.neighbours.size(); ++k) {
+    const NeighbourWeights& nb = weights.neighbours[k];
+    const Image* theirs = at(renders, nb.frame);
+    const Image* theirResult = at(results, nb.frame);
+    if (!drifted(nb) || !theirs || !theirResult) continue;
+    // Tested as the filter takes it: brought to the frame's light.
+    const Image factor = driftFactor(motion::resample(nb.resampling, *theirResult), *result,
+                                     nb.weight, weights.driftBox, 0.0, &nb.drifted);
+    const Image movedMapped = tonemapped(
+        scaled(motion::reprojectNearest(*theirs, nb.resampling.positions), factor), scale);
+    const Image movedResidual = difference(
+        movedMapped,
+        tonemapped(scaled(motion::reprojectNearest(*theirResult, nb.resampling.positions), factor),
+                   scale));
+    const std::vector<float> z = lightChange(mapped, movedMapped, nb.resampling.trust, residual,
+                                             movedResidual, options.lightBox);
+    out[k] = nb.weight;
+    for (std::size_t i = 0; i < z.size(); ++i)
+      out[k][i] *= std::clamp(
+          (options.passLightHigh - z[i]) / (options.passLightHigh - options.passLightLow), 0.0,
+          1.0);
+  }
   return out;
 }
 

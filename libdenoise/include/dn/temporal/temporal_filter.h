@@ -167,6 +167,19 @@ struct TemporalOptions {
   // experiments/shots/SPLIT_1080.md.
   double viewDependentShareAlone = 0.2;
   double lightShareAlone = 0.0;
+  // Where a neighbour's light drifted (driftThreshold), the light is changing
+  // between the frames: a light pass that is not view-dependent then takes
+  // that neighbour only where its own renders also pass a light test, with
+  // the weight falling from 1 at passLightLow standard errors to 0 at
+  // passLightHigh (passLightTested). The colour's test sees the sum of the
+  // passes, and a change in one of them (a turning chair's direct light)
+  // hides there under the others' noise. On the tuning side of
+  // experiments/shots/SPLIT_1080.md: chair_turn's Diffuse Direct went from
+  // 0.12 dB below the pass alone to 0.62 above (0.82 at the colour's 2 and
+  // 4, which cost up to 0.05 dB where the camera moved and the light did
+  // not; testing every neighbour cost up to 0.1 dB there). 0: off.
+  double passLightLow = 3.0;
+  double passLightHigh = 6.0;
   // The past frames' denoised histories count where the surface stood still
   // on screen, fully, falling to nothing at this many pixels of motion. Where
   // it moved, each was resampled on its way in and its errors follow the
@@ -266,8 +279,11 @@ TemporalResult filterFrame(const std::vector<const WindowFrame*>& window, std::s
 // `stillPixels` above 0: each neighbour's weight also falls linearly to 0 at
 // that much motion on screen, for an image of light that moves with the view,
 // not the surface (TemporalOptions::viewDependentMotion).
+// `tested`, where given: per neighbour of `weights`, its weights per pixel in
+// place of its own (passLightTested's; where it has none or an empty one: its own).
+using TestedWeights = std::vector<std::vector<double>>;
 Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& images,
-                 double stillPixels = 0.0);
+                 double stillPixels = 0.0, const TestedWeights* tested = nullptr);
 
 // `renders` (each window frame's render of any image, nullptr where none)
 // accumulated as the colour's renders were (TemporalResult::history): each
@@ -279,7 +295,7 @@ Image filterWith(const FilterWeights& weights, const std::vector<const Image*>& 
 // std::invalid_argument when the centre's render or result is missing.
 Image accumulateWith(const FilterWeights& weights, const std::vector<const Image*>& renders,
                      const std::vector<const Image*>& results, double stillPixels = 0.0,
-                     Image* frames = nullptr);
+                     Image* frames = nullptr, const TestedWeights* tested = nullptr);
 
 // The frame's accumulated render, denoised (`own`), averaged with its past
 // neighbours' as its result was with theirs where the surface stood still,
@@ -315,6 +331,17 @@ Image blendWithHistory(const Image& filtered, const Image& accumulated, double s
 // TemporalOptions::accumulatedShare; viewDependentShareAlone or
 // lightShareAlone) at one frame, rising linearly to accumulatedShare at two.
 Image passHistoryShare(const Image& frames, double alone, const TemporalOptions& options);
+// For each neighbour of `weights` whose light drifted, its weights times the
+// renders' light test (TemporalOptions::lightBox, passLightLow,
+// passLightHigh) on one light pass's own `renders`, brought to the
+// frame's light as filterWith brings them, their noise read against its
+// `results` (each frame's pass denoised alone); the other neighbours' empty.
+// Empty where no neighbour drifted, passLightHigh is 0 or the centre's
+// images are missing.
+TestedWeights passLightTested(const FilterWeights& weights,
+                              const std::vector<const Image*>& renders,
+                              const std::vector<const Image*>& results,
+                              const TemporalOptions& options);
 // blendWithHistory with a share per pixel (a one-channel image).
 Image blendWithHistory(const Image& filtered, const Image& accumulated, const Image& share);
 
