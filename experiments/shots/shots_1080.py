@@ -83,6 +83,10 @@ SHOTS = {
     "ball_roll":     (384, True),
     "cubes_turn":    (384, True),
     "bench_dolly":   (384, True),
+    # a sixth held-out set (SPLIT_1080.md)
+    "steps_truck":   (384, True),
+    "stool_turn":    (384, True),
+    "pots_orbit":    (384, True),
 }
 
 
@@ -661,6 +665,58 @@ def bench_dolly():
     drive(cam, "location", 0, "-0.6 + 0.025 * frame")
     drive(aim, "location", 0, "-0.2 + 0.02 * frame")
     return Vector((-0.1, 0.55, 0.46))  # the seat's front edge, slat shadows on the wall behind
+
+
+def steps_truck():
+    """Concrete steps with a clay pot against a stucco wall in a low morning sun
+    (sunrise HDRI); the camera trucks sideways: matte surfaces whose faint
+    glossy light moves with the view."""
+    world_hdri("sunrise", 0.7, 1.5)
+    light("SUN", "sun", (0, 0, 10), 3.0, 1.0, (math.radians(65), 0, math.radians(-50)))
+    box("ground", (0, 0, -0.05), (10, 8, 0.1), material("paving", (0.5, 0.48, 0.45), 0.85, "brick", 4.0))
+    box("wall", (0, 1.6, 1.5), (10, 0.2, 3.0), material("stucco", (0.78, 0.72, 0.62), 0.95, "noise", 30.0))
+    concrete = material("concrete", (0.55, 0.54, 0.52), 0.8, "noise", 25.0)
+    for i in range(4):  # rising to the wall, 0.3 deep and 0.18 high each
+        box("step%d" % i, (0.2, 0.45 + 0.3 * i, 0.09 * (i + 1)), (1.6, 0.3, 0.18 * (i + 1)), concrete)
+    cylinder("pot", (-0.8, 0.9, 0.18), 0.16, 0.36, material("clay", (0.62, 0.33, 0.2), 0.75, "noise", 20.0))
+    cam, aim = camera((-0.9, -1.6, 1.0), (-0.3, 1.0, 0.35), 45)
+    drive(cam, "location", 0, "-0.9 + 0.03 * frame")
+    drive(aim, "location", 0, "-0.3 + 0.025 * frame")
+    return Vector((-0.35, 0.95, 0.35))  # the pot's rim against the steps
+
+
+def stool_turn():
+    """A painted wooden stool turning on a turntable under an area key in a dim
+    studio (studio HDRI); locked off: matte faces and legs turning to and from the
+    light, their shadows turning with them."""
+    world_hdri("studio", 0.3, 1.0)
+    light("AREA", "key", (1.2, -1.0, 1.6), 150.0, 0.6, (math.radians(50), 0, math.radians(50)))
+    box("floor", (0, 0, -0.05), (6, 6, 0.1), material("boards", (0.45, 0.35, 0.25), 0.7, "wood", 5.0))
+    box("backdrop", (0, 1.4, 1.2), (6, 0.05, 2.4), material("paper", (0.5, 0.5, 0.48), 0.95, "noise", 25.0))
+    paint = material("paint", (0.3, 0.5, 0.35), 0.65, "wood", 12.0)
+    seat = cylinder("seat", (0, 0, 0.47), 0.18, 0.05, paint)
+    legs = [box("leg%d" % i, (0.12 * math.cos(a), 0.12 * math.sin(a), 0.24), (0.04, 0.04, 0.44), paint)
+            for i, a in enumerate((0.3, 2.4, 4.5))]
+    turntable((0, 0.3, 0), 0.4, material("disc", (0.3, 0.3, 0.32), 0.6, "noise", 20.0), [seat] + legs, 0.06)
+    camera((0.3, -1.8, 0.9), (0.0, 0.3, 0.3), 50)
+    return Vector((0.0, 0.25, 0.4))  # the seat's edge and the legs below
+
+
+def pots_orbit():
+    """Clay pots and a stone ball on a sandstone ledge at sunset (sunset HDRI, low
+    sun); the camera orbits them: matte surfaces turning in view, the light
+    fixed."""
+    world_hdri("sunset", 0.8, 0.5)
+    light("SUN", "sun", (0, 0, 10), 3.0, 1.0, (math.radians(72), 0, math.radians(110)))
+    box("ledge", (0, 0, -0.05), (3, 2, 0.1), material("sandstone", (0.7, 0.58, 0.42), 0.85, "noise", 18.0))
+    clay = material("clay", (0.6, 0.32, 0.2), 0.75, "noise", 20.0)
+    cylinder("pot0", (-0.2, 0.05, 0.12), 0.12, 0.24, clay)
+    cylinder("pot1", (0.15, -0.05, 0.09), 0.09, 0.18, clay)
+    sphere("ball", (0.02, 0.22, 0.08), 0.08, material("stone", (0.5, 0.5, 0.47), 0.9, "noise", 40.0))
+    cam, aim = camera((0.0, -1.2, 0.6), (0.0, 0.05, 0.1), 45)
+    drive(cam, "location", 0, "1.2 * sin(0.02 * frame - 0.08)")
+    drive(cam, "location", 1, "-1.2 * cos(0.02 * frame - 0.08)")
+    return Vector((-0.02, 0.0, 0.12))  # between the pots
 
 
 # ---------------------------------------------------------------- framing and rendering
