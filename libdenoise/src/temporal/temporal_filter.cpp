@@ -32,6 +32,16 @@ Image tonemapped(const Image& linear, double scale) {
   return out;
 }
 
+// A test's weight: 1 up to `low`, falling linearly to 0 at `high`.
+double fallingWeight(double value, double low, double high) {
+  return std::clamp((high - value) / (high - low), 0.0, 1.0);
+}
+
+// Window frame k's image, nullptr where it has none.
+const Image* imageAt(const std::vector<const Image*>& images, std::size_t k) {
+  return k < images.size() ? images[k] : nullptr;
+}
+
 Image difference(const Image& a, const Image& b) {
   Image out(a.width, a.height, a.channels);
   std::transform(a.pixels.begin(), a.pixels.end(), b.pixels.begin(), out.pixels.begin(),
@@ -514,9 +524,7 @@ Contribution contributionOf(const Centre& centre, const WindowFrame& neighbour, 
     return out;
   }
   for (std::size_t i = 0; i < out.weight.size(); ++i)
-    out.weight[i] = trust.pixels[i] * std::clamp((options.lightHigh - light[i]) /
-                                                     (options.lightHigh - options.lightLow),
-                                                 0.0, 1.0);
+    out.weight[i] = trust.pixels[i] * fallingWeight(light[i], options.lightLow, options.lightHigh);
   if (options.learnedTrust || options.observeTrust)
     out.lightChange = std::move(light);  // a feature
   out.resampling = std::move(plan);
@@ -594,8 +602,7 @@ void applyColourTest(Contribution& k, const Image& referenceMapped, const Centre
   for (std::size_t i = 0; i < d.size(); ++i) {
     if (k.weight[i] <= 0.0) continue;
     const double z = d[i] / centre.noise[i] / k.spread;
-    k.weight[i] *=
-        std::clamp((options.colourHigh - z) / (options.colourHigh - options.colourLow), 0.0, 1.0);
+    k.weight[i] *= fallingWeight(z, options.colourLow, options.colourHigh);
   }
 }
 
@@ -966,11 +973,8 @@ Image combineOver(const char* caller, const FilterWeights& weights,
                   const std::vector<const Image*>& images, const std::vector<const Image*>& lightOf,
                   double stillPixels, bool nearest, const TestedWeights* tested,
                   Image* frames = nullptr) {
-  auto at = [](const std::vector<const Image*>& v, std::size_t k) {
-    return k < v.size() ? v[k] : nullptr;
-  };
-  const Image* own = at(images, weights.centre);
-  const Image* ownLight = at(lightOf, weights.centre);
+  const Image* own = imageAt(images, weights.centre);
+  const Image* ownLight = imageAt(lightOf, weights.centre);
   if (!own || !ownLight)
     throw std::invalid_argument(std::string(caller) + ": the centre frame's image is missing");
   // Reserved, so that `others` may point into them as they grow.
@@ -981,8 +985,8 @@ Image combineOver(const char* caller, const FilterWeights& weights,
   std::vector<Weighted> others;
   for (std::size_t k = 0; k < weights.neighbours.size(); ++k) {
     const NeighbourWeights& nb = weights.neighbours[k];
-    const Image* image = at(images, nb.frame);
-    const Image* light = at(lightOf, nb.frame);
+    const Image* image = imageAt(images, nb.frame);
+    const Image* light = imageAt(lightOf, nb.frame);
     if (!image || !image->sameShape(*own) || !light || !light->sameShape(*ownLight)) continue;
     const std::vector<double>& taken =
         tested && k < tested->size() && !(*tested)[k].empty() ? (*tested)[k] : nb.weight;
@@ -1052,8 +1056,7 @@ std::vector<std::vector<double>> historyTrust(const Image& own, const TemporalRe
     const std::vector<float> d = mappedDifference(past.images[k], past.scale, ownMapped);
     for (std::size_t i = 0; i < d.size(); ++i) {
       const double error = past.noise[i] * std::sqrt(2.0 / result.historyFrames.pixels[i]);
-      weights[k][i] *= std::clamp(
-          (options.lightHigh - d[i] / error) / (options.lightHigh - options.lightLow), 0.0, 1.0);
+      weights[k][i] *= fallingWeight(d[i] / error, options.lightLow, options.lightHigh);
     }
   }
   return weights;
@@ -1128,11 +1131,8 @@ TestedWeights passLightTested(const FilterWeights& weights,
                               const std::vector<const Image*>& renders,
                               const std::vector<const Image*>& results,
                               const TemporalOptions& options) {
-  auto at = [](const std::vector<const Image*>& v, std::size_t k) {
-    return k < v.size() ? v[k] : nullptr;
-  };
-  const Image* render = at(renders, weights.centre);
-  const Image* result = at(results, weights.centre);
+  const Image* render = imageAt(renders, weights.centre);
+  const Image* result = imageAt(results, weights.centre);
   auto drifted = [](const NeighbourWeights& nb) { return !nb.drifted.empty(); };
   if (!render || !result || options.passLightHigh <= 0.0 ||
       std::none_of(weights.neighbours.begin(), weights.neighbours.end(), drifted))
@@ -1143,8 +1143,8 @@ TestedWeights passLightTested(const FilterWeights& weights,
   TestedWeights out(weights.neighbours.size());
   for (std::size_t k = 0; k < weights.neighbours.size(); ++k) {
     const NeighbourWeights& nb = weights.neighbours[k];
-    const Image* theirs = at(renders, nb.frame);
-    const Image* theirResult = at(results, nb.frame);
+    const Image* theirs = imageAt(renders, nb.frame);
+    const Image* theirResult = imageAt(results, nb.frame);
     if (!drifted(nb) || !theirs || !theirResult) continue;
     // Tested as the filter takes it: brought to the frame's light.
     const Image factor = driftFactor(motion::resample(nb.resampling, *theirResult), *result,
@@ -1159,9 +1159,7 @@ TestedWeights passLightTested(const FilterWeights& weights,
                                              movedResidual, options.lightBox);
     out[k] = nb.weight;
     for (std::size_t i = 0; i < z.size(); ++i)
-      out[k][i] *= std::clamp(
-          (options.passLightHigh - z[i]) / (options.passLightHigh - options.passLightLow), 0.0,
-          1.0);
+      out[k][i] *= fallingWeight(z[i], options.passLightLow, options.passLightHigh);
   }
   return out;
 }
