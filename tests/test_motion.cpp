@@ -629,6 +629,31 @@ TEST_CASE("a light pass's history share follows the frames its render gathered")
   CHECK(temporal::passHistoryShare(frames, 0.9, options).pixels[0] == doctest::Approx(0.35));
 }
 
+TEST_CASE("a view-dependent pass's share alone follows how much of the light is view-dependent") {
+  temporal::TemporalOptions options;
+  options.accumulatedShare = 0.35;
+  options.viewDependentShareAlone = 0.2;
+  options.viewDependentShareFull = 0.5;
+  Image viewDependent(4, 1, 1);
+  viewDependent.pixels = {0.0f, 0.25f, 0.5f, 1.0f};
+  const Image alone = temporal::viewDependentAlone(viewDependent, options);
+  CHECK(alone.pixels[0] == 0.0f);  // matte: the pass alone
+  CHECK(alone.pixels[1] == doctest::Approx(0.1));
+  CHECK(alone.pixels[2] == doctest::Approx(0.2));
+  CHECK(alone.pixels[3] == doctest::Approx(0.2));
+  // Where the render gathered two frames the share is the colour's, whatever the light.
+  Image frames(4, 1, 1, 1.0f);
+  frames.pixels[1] = 2.0f;
+  const Image share = temporal::passHistoryShare(frames, alone, options);
+  CHECK(share.pixels[0] == 0.0f);
+  CHECK(share.pixels[1] == doctest::Approx(0.35));
+  CHECK(share.pixels[3] == doctest::Approx(0.2));
+  options.viewDependentShareFull = 0.0;  // off: in full everywhere
+  CHECK(temporal::viewDependentAlone(viewDependent, options).pixels[0] == doctest::Approx(0.2));
+  CHECK_THROWS_AS(temporal::passHistoryShare(frames, Image(3, 1, 1), options),
+                  std::invalid_argument);
+}
+
 TEST_CASE("temporal filter: the past frames' denoised histories average with the frame's own") {
   const Synthetic truth = makeFrame(32, 24, 0, 0);
   std::vector<temporal::WindowFrame> frames = stillShot(truth, 5, 700, 800);

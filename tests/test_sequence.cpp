@@ -321,8 +321,13 @@ TEST_CASE("a light companion's history share follows what its render gathered") 
   // the colour's weights: at the colour's share everywhere both come out as
   // the colour; with none where its render gathered one frame, a companion
   // differs where it gathered under two, but not where it gathered two or more.
-  auto run = [](double lightAlone, double viewDependentAlone) {
+  auto run = [](double lightAlone, double viewDependentAlone, float viewDependentLight = -1.0f) {
     temporal::SequenceSettings settings = withoutRelighting();
+    if (viewDependentLight >= 0.0f)  // every frame's view-dependent share of its light
+      settings.viewDependentShare = [viewDependentLight](const std::string&,
+                                                         const FrameBuffers& frame) {
+        return Image(frame.width, frame.height, 1, viewDependentLight);
+      };
     settings.filter.viewDependentMotion = 0.0;
     settings.filter.accumulatedShare = 0.5;
     settings.filter.lightShareAlone = lightAlone;
@@ -358,4 +363,8 @@ TEST_CASE("a light companion's history share follows what its render gathered") 
     CHECK(differ > 0);
     CHECK(differ < colour.pixels.size());
   }
+  // The view-dependent share alone in full where the frame's light is view-dependent
+  // (TemporalOptions::viewDependentShareFull), none where none of it is.
+  CHECK(run(0.5, 0.5, 1.0f).at("glossy").pixels == colour.pixels);
+  CHECK(run(0.5, 0.5, 0.0f).at("glossy").pixels == run(0.5, 0.0).at("glossy").pixels);
 }

@@ -519,12 +519,25 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
   for (const NeighbourWeights& nb : weights.neighbours)
     made[nb.frame] = &companionsOf(first + static_cast<int>(nb.frame), make);
   const std::size_t size = made.rbegin()->first + 1;
+  const HeldCompanions& ownCompanions = *made.at(weights.centre);
+  std::vector<const std::string*> overTime;
   FilteredCompanions out;
-  for (const auto& [name, own] : *made.at(weights.centre)) {
-    if (!own.overTime) {
+  for (const auto& [name, own] : ownCompanions)
+    if (own.overTime)
+      overTime.push_back(&name);
+    else
       out.filtered[name] = own.image.toImage();
-      continue;
-    }
+  // The frame's view-dependent share of its light, where its file has such passes.
+  const Image viewDependent = inputs_.at(number)->frame.viewDependent.toImage();
+  // Each pass on a thread of the filter's: they share nothing but the weights.
+  struct Pass {
+    Image filtered, accumulated, historyShare;
+  };
+  std::vector<Pass> passes(overTime.size());
+  forEach(overTime.size(), settings_.filter.threads, [&](std::size_t p) {
+    const std::string& name = *overTime[p];
+    const HeldCompanion& own = ownCompanions.at(name);
+    Pass& pass = passes[p];
     // In floats while this companion is filtered.
     std::vector<Image> unpacked(2 * size);
     std::vector<const Image*> images(size, nullptr), renders(size, nullptr);
@@ -539,21 +552,30 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
     // where nothing transmits) stays black, without resampling.
     if (std::all_of(images.begin(), images.end(), [](const Image* i) { return allZero(i); }) &&
         std::all_of(renders.begin(), renders.end(), [](const Image* i) { return allZero(i); })) {
-      out.filtered[name] = *images[weights.centre];
-      continue;
+      pass.filtered = *images[weights.centre];
+      return;
     }
     const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;
     const TestedWeights tested = own.viewDependent || own.render.empty()
                                      ? TestedWeights()
                                      : passLightTested(weights, renders, images, settings_.filter);
-    out.filtered[name] = filterWith(weights, images, still, &tested);
+    pass.filtered = filterWith(weights, images, still, &tested);
     if (accumulate && !own.render.empty()) {
       Image frames;
-      out.accumulated[name] = accumulateWith(weights, renders, images, still, &frames, &tested);
+      pass.accumulated = accumulateWith(weights, renders, images, still, &frames, &tested);
       const TemporalOptions& o = settings_.filter;
-      out.historyShare[name] = passHistoryShare(
-          frames, own.viewDependent ? o.viewDependentShareAlone : o.lightShareAlone, o);
+      pass.historyShare = !own.viewDependent ? passHistoryShare(frames, o.lightShareAlone, o)
+                          : viewDependent.empty()
+                              ? passHistoryShare(frames, o.viewDependentShareAlone, o)
+                              : passHistoryShare(frames, viewDependentAlone(viewDependent, o), o);
     }
+  });
+  for (std::size_t p = 0; p < overTime.size(); ++p) {
+    const std::string& name = *overTime[p];
+    out.filtered[name] = std::move(passes[p].filtered);
+    if (passes[p].accumulated.empty()) continue;
+    out.accumulated[name] = std::move(passes[p].accumulated);
+    out.historyShare[name] = std::move(passes[p].historyShare);
   }
   return out;
 }

@@ -1096,11 +1096,32 @@ Image historyMean(const Image& own, const TemporalResult& result, const Temporal
 }
 
 Image passHistoryShare(const Image& frames, double alone, const TemporalOptions& options) {
+  return passHistoryShare(frames, Image(frames.width, frames.height, 1, static_cast<float>(alone)),
+                          options);
+}
+
+Image passHistoryShare(const Image& frames, const Image& alone, const TemporalOptions& options) {
+  if (alone.channels != 1 || alone.pixelCount() != frames.pixelCount())
+    throw std::invalid_argument("passHistoryShare: the share alone differs in shape");
   const double full = options.accumulatedShare;
-  alone = std::min(alone, full);
   Image out = frames;
-  for (float& f : out.pixels)
-    f = static_cast<float>(alone + (full - alone) * std::clamp(f - 1.0, 0.0, 1.0));
+  for (std::size_t i = 0; i < out.pixels.size(); ++i) {
+    const double own = std::min<double>(alone.pixels[i], full);
+    out.pixels[i] =
+        static_cast<float>(own + (full - own) * std::clamp(frames.pixels[i] - 1.0, 0.0, 1.0));
+  }
+  return out;
+}
+
+Image viewDependentAlone(const Image& viewDependent, const TemporalOptions& options) {
+  if (viewDependent.channels != 1)
+    throw std::invalid_argument("viewDependentAlone: the view-dependent share has one channel");
+  Image out(viewDependent.width, viewDependent.height, 1,
+            static_cast<float>(options.viewDependentShareAlone));
+  if (options.viewDependentShareFull <= 0.0) return out;
+  for (std::size_t i = 0; i < out.pixels.size(); ++i)
+    out.pixels[i] *= static_cast<float>(
+        std::clamp(viewDependent.pixels[i] / options.viewDependentShareFull, 0.0, 1.0));
   return out;
 }
 

@@ -167,6 +167,16 @@ struct TemporalOptions {
   // experiments/shots/SPLIT_1080.md.
   double viewDependentShareAlone = 0.2;
   double lightShareAlone = 0.0;
+  // viewDependentShareAlone is taken in full where the view-dependent passes
+  // hold at least this share of the frame's light (WindowFrame::viewDependent),
+  // in proportion below it: on matte surfaces, where their light is faint, the
+  // smaller network's opinion is the worse one. On the tuning side of
+  // experiments/shots/SPLIT_1080.md three shots whose faint Glossy Indirect
+  // fell 0.04 to 0.06 dB below the pass alone came to -0.006 to +0.012 at 1
+  // (-0.012 to +0.010 at 0.5), a glossy toy car kept +0.11 of its +0.12, and
+  // a turning bottle's glossy passes rose from -0.01 to +0.02 and more.
+  // 0: in full everywhere.
+  double viewDependentShareFull = 1.0;
   // Where a neighbour's light drifted (driftThreshold), the light is changing
   // between the frames: a light pass that is not view-dependent then takes
   // that neighbour only where its own renders also pass a light test, with
@@ -331,6 +341,12 @@ Image blendWithHistory(const Image& filtered, const Image& accumulated, double s
 // TemporalOptions::accumulatedShare; viewDependentShareAlone or
 // lightShareAlone) at one frame, rising linearly to accumulatedShare at two.
 Image passHistoryShare(const Image& frames, double alone, const TemporalOptions& options);
+// The same with `alone` per pixel (one channel, `frames`' size).
+Image passHistoryShare(const Image& frames, const Image& alone, const TemporalOptions& options);
+// A view-dependent pass's share alone per pixel (TemporalOptions::
+// viewDependentShareAlone, viewDependentShareFull), from its frame's
+// WindowFrame::viewDependent.
+Image viewDependentAlone(const Image& viewDependent, const TemporalOptions& options);
 // For each neighbour of `weights` whose light drifted, its weights times the
 // renders' light test (TemporalOptions::lightBox, passLightLow,
 // passLightHigh) on one light pass's own `renders`, brought to the
