@@ -527,8 +527,13 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
       overTime.push_back(&name);
     else
       out.filtered[name] = own.image.toImage();
-  // The frame's view-dependent share of its light, where its file has such passes.
-  const Image viewDependent = inputs_.at(number)->frame.viewDependent.toImage();
+  // A view-dependent pass's share alone per pixel, by the frame's view-dependent
+  // share of its light, where its file has such passes.
+  const TemporalOptions& o = settings_.filter;
+  const WindowImage& viewDependent = inputs_.at(number)->frame.viewDependent;
+  const Image viewDependentShareAlone = accumulate && !viewDependent.empty()
+                                            ? viewDependentAlone(viewDependent.toImage(), o)
+                                            : Image();
   // Each pass on a thread of the filter's: they share nothing but the weights.
   struct Pass {
     Image filtered, accumulated, historyShare;
@@ -555,19 +560,19 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
       pass.filtered = *images[weights.centre];
       return;
     }
-    const double still = own.viewDependent ? settings_.filter.viewDependentMotion : 0.0;
+    const double still = own.viewDependent ? o.viewDependentMotion : 0.0;
     const TestedWeights tested = own.viewDependent || own.render.empty()
                                      ? TestedWeights()
-                                     : passLightTested(weights, renders, images, settings_.filter);
+                                     : passLightTested(weights, renders, images, o);
     pass.filtered = filterWith(weights, images, still, &tested);
     if (accumulate && !own.render.empty()) {
       Image frames;
       pass.accumulated = accumulateWith(weights, renders, images, still, &frames, &tested);
-      const TemporalOptions& o = settings_.filter;
-      pass.historyShare = !own.viewDependent ? passHistoryShare(frames, o.lightShareAlone, o)
-                          : viewDependent.empty()
-                              ? passHistoryShare(frames, o.viewDependentShareAlone, o)
-                              : passHistoryShare(frames, viewDependentAlone(viewDependent, o), o);
+      pass.historyShare =
+          own.viewDependent && !viewDependentShareAlone.empty()
+              ? passHistoryShare(frames, viewDependentShareAlone, o)
+              : passHistoryShare(
+                    frames, own.viewDependent ? o.viewDependentShareAlone : o.lightShareAlone, o);
     }
   });
   for (std::size_t p = 0; p < overTime.size(); ++p) {
