@@ -87,6 +87,10 @@ SHOTS = {
     "steps_truck":   (384, True),
     "stool_turn":    (384, True),
     "pots_orbit":    (384, True),
+    # a seventh held-out set (SPLIT_1080.md)
+    "jar_turn":      (384, True),
+    "kettle_slide":  (384, True),
+    "desk_dolly":    (384, True),
 }
 
 
@@ -717,6 +721,57 @@ def pots_orbit():
     drive(cam, "location", 0, "1.2 * sin(0.02 * frame - 0.08)")
     drive(cam, "location", 1, "-1.2 * cos(0.02 * frame - 0.08)")
     return Vector((-0.02, 0.0, 0.12))  # between the pots
+
+
+def jar_turn():
+    """A glazed ceramic jar and a matte clay cup turning together on a turntable
+    under a softbox key (city HDRI, dim); locked off: the glaze's soft
+    highlights turning across the jar, the cup's matte faces to and from the key."""
+    world_hdri("city", 0.3, 1.2)
+    light("AREA", "key", (-1.1, -1.0, 1.5), 140.0, 0.7, (math.radians(50), 0, math.radians(-45)))
+    box("floor", (0, 0, -0.05), (6, 6, 0.1), material("slate", (0.3, 0.3, 0.32), 0.75, "noise", 30.0))
+    box("backdrop", (0, 1.3, 1.2), (6, 0.05, 2.4), material("canvas", (0.55, 0.5, 0.42), 0.95, "noise", 20.0))
+    jar = cylinder("jar", (-0.1, 0, 0.16), 0.11, 0.32, material("glaze", (0.15, 0.3, 0.55), 0.25, "noise", 15.0))
+    cup = cylinder("cup", (0.16, -0.04, 0.06), 0.06, 0.12, material("clay", (0.65, 0.4, 0.28), 0.85, "noise", 25.0))
+    turntable((0, 0.2, 0), 0.35, material("disc", (0.35, 0.33, 0.3), 0.6, "wood", 8.0), [jar, cup], 0.05)
+    camera((-0.2, -1.7, 0.8), (0.0, 0.2, 0.15), 50)
+    return Vector((0.04, 0.16, 0.1))  # the jar's side and the cup beside it
+
+
+def kettle_slide():
+    """A brushed steel kettle and a copper pan sliding slowly along a worktop
+    under a window light (interior HDRI, sun through the window); locked off:
+    metal whose reflections do not follow the motion vectors."""
+    world_hdri("interior", 0.6, 2.6)
+    light("SUN", "sun", (0, 0, 10), 3.0, 2.0, (math.radians(60), 0, math.radians(-120)))
+    box("worktop", (0, 0, -0.02), (3, 1.2, 0.04), material("oak", (0.55, 0.4, 0.25), 0.45, "wood", 8.0))
+    box("tiles", (0, 0.6, 0.6), (3, 0.05, 1.2), material("tiles", (0.85, 0.85, 0.82), 0.3, "brick", 10.0))
+    kettle = cylinder("kettle", (-0.1, 0.1, 0.1), 0.09, 0.2, material("steel", (0.8, 0.8, 0.82), 0.2, metallic=1.0))
+    pan = cylinder("pan", (0.2, 0.05, 0.03), 0.1, 0.06, material("copper", (0.95, 0.6, 0.45), 0.15, metallic=1.0))
+    drive(kettle, "location", 0, "-0.1 + 0.008 * frame")
+    drive(kettle, "rotation_euler", 2, "0.04 * frame")
+    drive(pan, "location", 0, "0.2 - 0.006 * frame")
+    camera((0.1, -1.3, 0.5), (0.0, 0.1, 0.08), 50)
+    return Vector((0.0, 0.08, 0.1))  # between the kettle and the pan
+
+
+def desk_dolly():
+    """A varnished writing desk with a lacquered box and paper stacks before a
+    painted wall (sunset HDRI through the window, a desk lamp); the camera
+    dollies past: soft glossy light on varnish moving with the view."""
+    world_hdri("sunset", 0.6, 0.8)
+    light("AREA", "lamp", (0.5, 0.2, 1.0), 25.0, 0.25, (0, 0, 0), (1.0, 0.8, 0.6))
+    box("floor", (0, 0, -0.05), (8, 8, 0.1), material("carpet", (0.35, 0.3, 0.28), 0.95, "noise", 60.0))
+    box("wall", (0, 0.9, 1.2), (8, 0.1, 2.4), material("paint", (0.6, 0.62, 0.55), 0.9, "noise", 15.0))
+    box("desk", (0, 0.4, 0.72), (1.4, 0.7, 0.04), material("varnish", (0.4, 0.22, 0.12), 0.3, "wood", 6.0))
+    box("lacquer", (-0.25, 0.35, 0.78), (0.25, 0.15, 0.08), material("lacquer", (0.5, 0.05, 0.05), 0.2))
+    for i in range(3):
+        box("paper%d" % i, (0.25, 0.4 + 0.02 * i, 0.75 + 0.01 * i), (0.21, 0.29, 0.01),
+            material("paper%d" % i, (0.85, 0.84, 0.8), 0.95))
+    cam, aim = camera((-0.5, -1.2, 1.2), (-0.15, 0.4, 0.75), 45)
+    drive(cam, "location", 0, "-0.5 + 0.025 * frame")
+    drive(aim, "location", 0, "-0.15 + 0.02 * frame")
+    return Vector((-0.1, 0.35, 0.76))  # the lacquered box's edge on the varnish
 
 
 # ---------------------------------------------------------------- framing and rendering
