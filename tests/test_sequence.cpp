@@ -316,6 +316,31 @@ TEST_CASE("a companion made as the colour is filtered, accumulated and averaged 
   CHECK(averaged >= 4);
 }
 
+TEST_CASE("a view-dependent companion takes the colour's weights where its surface moves") {
+  // The colour's weights already fall with motion by the frame's view-dependent
+  // share of its light (TemporalOptions::viewDependentMotion): a view-dependent
+  // companion takes them as they are, so on the moving box it comes out as the
+  // colour, its share alone in full (viewDependentShareFull at the frame's share).
+  temporal::SequenceSettings settings = withoutRelighting();
+  settings.viewDependentShare = [](const std::string&, const FrameBuffers& frame) {
+    return Image(frame.width, frame.height, 1, 0.5f);
+  };
+  settings.filter.accumulatedShare = settings.filter.lightShareAlone = 0.5;
+  settings.filter.viewDependentShareAlone = 0.5;
+  settings.filter.viewDependentShareFull = 0.5;
+  REQUIRE(settings.filter.viewDependentMotion > 0.0);
+  CountedShot counted;
+  auto shot = counted.plan(settings);
+  REQUIRE(shot);
+  const temporal::CompanionMaker maker = blurredCompanions({"colour", "glossy"}, "glossy");
+  for (const auto& file : counted.files) {
+    CAPTURE(file);
+    const auto out =
+        shot->denoise(file, shot->frame(file, counted.read), counted.read, asBlurred, maker);
+    CHECK(out.companions.at("glossy").pixels == out.result.color.pixels);
+  }
+}
+
 TEST_CASE("a light companion's history share follows what its render gathered") {
   // As above, the view-dependent gate off so that the glossy companion takes
   // the colour's weights: at the colour's share everywhere both come out as

@@ -560,14 +560,15 @@ Sequence::FilteredCompanions Sequence::filteredCompanions(int number, const Filt
       pass.filtered = *images[weights.centre];
       return;
     }
-    const double still = own.viewDependent ? o.viewDependentMotion : 0.0;
+    // A view-dependent pass takes the colour's weights as they are: they already
+    // fall with motion by the frame's view-dependent share of the light.
     const TestedWeights tested = own.viewDependent || own.render.empty()
                                      ? TestedWeights()
                                      : passLightTested(weights, renders, images, o);
-    pass.filtered = filterWith(weights, images, still, &tested);
+    pass.filtered = filterWith(weights, images, 0.0, &tested);
     if (accumulate && !own.render.empty()) {
       Image frames;
-      pass.accumulated = accumulateWith(weights, renders, images, still, &frames, &tested);
+      pass.accumulated = accumulateWith(weights, renders, images, 0.0, &frames, &tested);
       pass.historyShare =
           own.viewDependent && !viewDependentShareAlone.empty()
               ? passHistoryShare(frames, viewDependentShareAlone, o)
@@ -621,8 +622,7 @@ Image Sequence::companionHistoryMean(int number, const std::string& name, const 
     const WindowImage& history = companions->at(name).history;
     if (!history.empty()) histories[nb.frame] = &history.floats(unpacked[nb.frame]);
   }
-  const bool viewDependent = inputs_.at(number)->companions->at(name).viewDependent;
-  return filterWith(weights, histories, viewDependent ? settings_.filter.viewDependentMotion : 0.0);
+  return filterWith(weights, histories);
 }
 
 DenoiseResult Sequence::denoise(const std::string& file, const FrameBuffers& frame,
