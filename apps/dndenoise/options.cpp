@@ -124,9 +124,10 @@ output:
   --passes-temporal light|all|off
                       on a sequence with motion vectors: the light passes
                       filtered over time with the beauty's weights, their
-                      renders accumulated and denoised again as its are, the
-                      residual closing the sum (light, default); the colour
-                      passes too (all); every pass as denoised alone (off)
+                      renders accumulated and denoised again as its are, and
+                      Diffuse Color filtered too, the residual closing the sum
+                      (light, default); the colour passes of view-dependent
+                      light too (all); every pass as denoised alone (off)
 display (PNG/JPEG/TIFF outputs and --preview):
   --ocio CONFIG       OpenColorIO config file (default: $OCIO, else the built-in
                       sRGB config: clamp to [0, 1] and the sRGB curve)

@@ -101,7 +101,8 @@ void reportPasses(const std::string& name, const PassesResult& passes, bool over
              name, passes.denoised.maxRelativeError);
   if (overTime)
     fmt::print(stderr, "dndenoise: {}: {} filtered over time with the beauty's weights\n", name,
-               which == PassesOverTime::All ? "light and colour passes" : "light passes");
+               which == PassesOverTime::All ? "light and colour passes"
+                                            : "light passes and the diffuse colour passes");
 }
 
 void checkAgainstReference(const Options& o, const Image& ref, const Image& result, int& status) {

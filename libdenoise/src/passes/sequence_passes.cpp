@@ -14,11 +14,23 @@ namespace {
 
 float finiteOr0(float v) { return std::isfinite(v) ? v : 0.0f; }
 
+// Whether `key` is the colour pass of a term whose light moves with the view
+// (Glossy Color): it changes with the view as that light does.
+bool colorOfViewDependentLight(const LightPassLayout& layout, const std::string& key) {
+  for (const LightPassTerm& term : layout.terms)
+    if (term.color == key)
+      for (const std::string& light : term.lights)
+        if (const LightPassSpec* spec = layout.rule->find(light); spec && spec->viewDependent)
+          return true;
+  return false;
+}
+
 bool filteredOverTime(const LightPassLayout& layout, const std::string& key,
                       PassesOverTime overTime) {
   if (overTime == PassesOverTime::Off) return false;
   const LightPassSpec* spec = layout.rule->find(key);
-  return overTime == PassesOverTime::All || !(spec && spec->isColor);
+  if (overTime == PassesOverTime::All || !(spec && spec->isColor)) return true;
+  return !colorOfViewDependentLight(layout, key);
 }
 
 }  // namespace

@@ -20,9 +20,13 @@ namespace dn {
 
 // Which passes are filtered over time.
 enum class PassesOverTime {
-  Light,  // the light passes; the colour passes as denoised alone (the default, measured)
-  All,    // the colour passes too
-  Off,    // none: every pass as denoised alone, the residual takes the beauty's filtering
+  // The light passes and the colour passes of the terms whose light follows the
+  // surface (Diffuse Color: it closes the sum where a textured surface moves);
+  // those of view-dependent light (Glossy Color) as denoised alone (the default,
+  // measured: docs/RESULTS.md).
+  Light,
+  All,  // the colour passes too
+  Off,  // none: every pass as denoised alone, the residual takes the beauty's filtering
 };
 
 struct SequencePassOptions {
