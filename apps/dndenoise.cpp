@@ -121,10 +121,14 @@ int run(Options o, int argc, char** argv) {
                                      100 * f, cli::formatDuration(elapsed),
                                      cli::formatDuration(f > 0 ? elapsed * (1 - f) / f : 0)));
       };
+    SequencePassOptions passOptions{passOptionsFor(options), o.passesOverTime};
+    DenoiseOptions again = options;  // the accumulated renders' second denoising
+    if (passesOverTime)
+      again.precision = passOptions.accumulatedPrecision =
+          secondDenoisingPrecision(options.precision, options.device, o.wasGiven("--precision"));
     const auto alone = [&](const std::string&, const FrameBuffers& f) {
-      return denoiser.denoise(f, options);
+      return denoiser.denoise(f, f.accumulated ? again : options);
     };
-    const SequencePassOptions passOptions{passOptionsFor(options), o.passesOverTime};
     std::vector<double> times;
     DenoiseResult result;
     std::map<std::string, Image> filteredPasses;
@@ -163,7 +167,7 @@ int run(Options o, int argc, char** argv) {
       passes = passesOverTime
                    ? passesOfSequenceFrame(input, frame, filteredPasses, result.color, passOptions)
                    : denoisePassesOfFile(passBase, input, frame, result.color, passOptions.denoise);
-      if (o.verbose) reportPasses(name, *passes, passesOverTime, o.passesOverTime);
+      if (o.verbose) reportPasses(name, *passes, passesOverTime ? &passOptions : nullptr);
     }
     writeOutputs(o, {output, previews.empty() ? "" : previews[j], input, name}, frame, result,
                  passes, display);

@@ -11,6 +11,8 @@
 #include <numeric>
 
 #include "dn/infer/denoiser.h"
+#include "dn/infer/device.h"
+#include "dn/infer/oidn_pipeline.h"
 #include "dn/io/buffer_io.h"
 #include "dn/metrics.h"
 #include "dn/passes/joint_denoise.h"
@@ -242,4 +244,32 @@ TEST_CASE(
   CHECK(maxRelativeDifference(recombine(layout, lifted.passes), brighter) < 1e-4);
   // The difference went into the passes, not only into the residual.
   CHECK(meanAbs(lifted.passes.at("diffuse_direct")) > meanAbs(apart.at("diffuse_direct")));
+}
+
+TEST_CASE("the passes run in their own precision, whatever the networks ran in before") {
+  const OidnBase base = oidnBaseOfModel(kModel);
+  const FrameBuffers frame = readFrame(kBlender5);
+  const LightPassLayout layout = findLightPasses(channelNames(kBlender5), "ViewLayer.");
+  const LightPassImages noisy = readLightPasses(kBlender5, layout, frame);
+  PassDenoiseOptions options;
+  const LightPassImages inFloat = denoisePassesApart(base, frame, layout, noisy, options);
+  useNetworkPrecision(base, Precision::BFloat16);  // as a sequence's second denoising leaves it
+  const LightPassImages again = denoisePassesApart(base, frame, layout, noisy, options);
+  for (const auto& [key, image] : inFloat) {
+    CAPTURE(key);
+    CHECK(again.at(key).pixels == image.pixels);
+  }
+  options.precision = Precision::BFloat16;
+  const LightPassImages reduced = denoisePassesApart(base, frame, layout, noisy, options);
+  CHECK(reduced.at("diffuse_direct").pixels != inFloat.at("diffuse_direct").pixels);
+}
+
+TEST_CASE("a sequence's second denoisings in bfloat16 only where the CPU computes it natively") {
+  const torch::Device cpu(torch::kCPU), cuda(torch::kCUDA);
+  const Precision native = cpuComputesBFloat16() ? Precision::BFloat16 : Precision::Float;
+  CHECK(secondDenoisingPrecision(Precision::Float, cpu, false) == native);
+  CHECK(secondDenoisingPrecision(Precision::Float, cpu, true) == Precision::Float);
+  CHECK(secondDenoisingPrecision(Precision::Float, cuda, false) == Precision::Float);
+  CHECK(secondDenoisingPrecision(Precision::Float16, cuda, false) == Precision::Float16);
+  CHECK(secondDenoisingPrecision(Precision::BFloat16, cpu, true) == Precision::BFloat16);
 }

@@ -193,6 +193,11 @@ std::vector<std::string> splitBufferList(const std::string& text) {
 
 }  // namespace
 
+bool Options::wasGiven(const std::string& flag) const {
+  return std::any_of(given.begin(), given.end(),
+                     [&](const GivenOption& option) { return option.flag == flag; });
+}
+
 Options parseArgs(int argc, char** argv) {
   cli::Args args(argc, argv);
   Options o;

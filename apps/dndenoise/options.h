@@ -45,7 +45,8 @@ struct Options {
   bool passes = false;                                    // --passes
   PassesOverTime passesOverTime = PassesOverTime::Light;  // --passes-temporal
   bool passesTemporalGiven = false;
-  std::vector<GivenOption> given;           // options that act on some models only
+  std::vector<GivenOption> given;  // options that act on some models only
+  bool wasGiven(const std::string& flag) const;
   bool temporal = true;                     // --temporal on|filter; off: false
   dn::temporal::SequenceSettings sequence;  // --window, --motion, --temporal filter
   std::string temporalTrust = "rules";      // --temporal-trust learned|rules

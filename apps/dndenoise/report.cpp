@@ -87,8 +87,8 @@ void reportResult(const Options& o, const Denoiser& denoiser, const std::string&
   }
 }
 
-void reportPasses(const std::string& name, const PassesResult& passes, bool overTime,
-                  PassesOverTime which) {
+void reportPasses(const std::string& name, const PassesResult& passes,
+                  const SequencePassOptions* overTime) {
   std::string found;
   for (const auto& key : passes.layout.usedKeys())
     found += (found.empty() ? "" : ", ") + passes.layout.layerName(key);
@@ -99,10 +99,18 @@ void reportPasses(const std::string& name, const PassesResult& passes, bool over
   fmt::print(stderr,
              "dndenoise: {}: denoised passes recombine to the beauty within {:.2g} relative\n",
              name, passes.denoised.maxRelativeError);
-  if (overTime)
-    fmt::print(stderr, "dndenoise: {}: {} filtered over time with the beauty's weights\n", name,
-               which == PassesOverTime::All ? "light and colour passes"
-                                            : "light passes and the diffuse colour passes");
+  if (!overTime) return;
+  fmt::print(stderr, "dndenoise: {}: {} filtered over time with the beauty's weights\n", name,
+             overTime->overTime == PassesOverTime::All
+                 ? "light and colour passes"
+                 : "light passes and the diffuse colour passes");
+  if (overTime->accumulatedPrecision != overTime->denoise.precision)
+    fmt::print(stderr,
+               "dndenoise: {}: the accumulated renders, the beauty's and the passes', denoised "
+               "again in {} (this CPU computes it natively; --precision {} keeps {} throughout)\n",
+               name, precisionName(overTime->accumulatedPrecision),
+               precisionName(overTime->denoise.precision),
+               precisionName(overTime->denoise.precision));
 }
 
 void checkAgainstReference(const Options& o, const Image& ref, const Image& result, int& status) {

@@ -8,6 +8,7 @@
 
 #include "dn/infer/denoiser.h"
 #include "dn/passes/joint_denoise.h"
+#include "dn/passes/sequence_passes.h"
 #include "dndenoise/options.h"
 
 namespace dn::dndenoise {
@@ -23,9 +24,9 @@ void reportResult(const Options& o, const Denoiser& denoiser, const std::string&
                   std::vector<double> times);
 
 // -v: the light passes found, the rule and how closely the denoised ones recombine.
-// `overTime`: a sequence's passes, filtered over time as `which` says.
-void reportPasses(const std::string& name, const PassesResult& passes, bool overTime,
-                  PassesOverTime which);
+// `overTime`: a sequence's passes' options, where they are filtered over time.
+void reportPasses(const std::string& name, const PassesResult& passes,
+                  const SequencePassOptions* overTime);
 
 // --ref/--maxerror: one line; `status` becomes kExitThreshold when it fails.
 void checkAgainstReference(const Options& o, const Image& ref, const Image& result, int& status);

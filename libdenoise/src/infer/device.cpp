@@ -61,4 +61,13 @@ std::optional<double> freeDeviceMemory(const torch::Device& device) {
 #endif
 }
 
+bool cpuComputesBFloat16() {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("amx-bf16") || __builtin_cpu_supports("avx512bf16");
+#else
+  return false;
+#endif
+}
+
 }  // namespace dn

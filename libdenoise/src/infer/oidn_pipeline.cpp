@@ -65,7 +65,7 @@ void applyRunSettings(OidnBase base, const DenoiseOptions& options) {
   if (options.precision == Precision::Float16 && !options.device.is_cuda())
     throw std::invalid_argument("precision fp16: half runs on CUDA only (on the " +
                                 options.device.str() + ": float or bf16)");
-  base->useInnerPrecision(innerPrecisionOf(options.precision));
+  useNetworkPrecision(base, options.precision);
   if (options.device.is_cuda()) at::globalContext().setBenchmarkCuDNN(options.cudnnBenchmark);
 }
 
@@ -89,6 +89,10 @@ float checkedExposure(const DenoiseOptions& options, const FrameBuffers& frame) 
 }
 
 }  // namespace
+
+void useNetworkPrecision(const OidnBase& base, Precision precision) {
+  OidnBase(base)->useInnerPrecision(innerPrecisionOf(precision));
+}
 
 FrameBuffers withCleanAux(const OidnBase& base, const FrameBuffers& frame,
                           const OidnRunOptions& albedoRun, const OidnRunOptions& normalRun) {

@@ -191,6 +191,7 @@ LightPassImages denoisePassesApart(const OidnBase& base, const FrameBuffers& fra
   if (!base->canPrefilter())
     throw std::invalid_argument("denoising light passes needs OIDN's prefilter-mode networks");
   const OidnRunOptions& run = options.run;
+  useNetworkPrecision(base, options.precision);
   // The guides as OIDN's prefilter mode cleans them (dn/infer/oidn_pipeline.h).
   const FrameBuffers clean = withCleanAux(base, frame, run, run);
   const Image& albedo = clean.get("albedo");
@@ -265,6 +266,7 @@ PassDenoiseOptions passOptionsFor(const DenoiseOptions& denoise) {
   options.run.device = denoise.device;
   options.run.tile = denoise.tile;
   options.run.maxMemoryBytes = denoise.maxMemoryBytes;
+  options.precision = denoise.precision;
   options.residualAlone = false;  // ShareRule::None: the sum closes it
   return options;
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "dn/infer/device.h"
 #include "dn/infer/oidn_pipeline.h"
 #include "dn/io/buffer_io.h"
 
@@ -59,10 +60,13 @@ temporal::CompanionMaker lightPassCompanions(const OidnBase& base,
     return companions;
   };
   if (again)
-    maker.denoiseAccumulated = [base, apart](const FrameBuffers& guides,
-                                             const std::map<std::string, Image>& accumulated) {
+    maker.denoiseAccumulated = [base, apart, precision = options.accumulatedPrecision](
+                                   const FrameBuffers& guides,
+                                   const std::map<std::string, Image>& accumulated) {
+      useNetworkPrecision(base, apart.precision);
       const FrameBuffers clean =
           guides.auxPrefiltered ? guides : withCleanAux(base, guides, apart.run, apart.run);
+      useNetworkPrecision(base, precision);
       std::map<std::string, Image> out;
       for (const auto& [key, render] : accumulated)
         out[key] =
@@ -70,6 +74,13 @@ temporal::CompanionMaker lightPassCompanions(const OidnBase& base,
       return out;
     };
   return maker;
+}
+
+Precision secondDenoisingPrecision(Precision precision, const torch::Device& device,
+                                   bool precisionGiven) {
+  const bool faster = device.is_cpu() && cpuComputesBFloat16();
+  return precision == Precision::Float && faster && !precisionGiven ? Precision::BFloat16
+                                                                    : precision;
 }
 
 namespace {

@@ -151,6 +151,7 @@ FrameBuffers withCleanedGuides(FrameBuffers out, const WindowImage& cleanAlbedo,
 FrameBuffers withHistory(FrameBuffers out, Image history, const DenoiseResult& alone,
                          const WindowImage& cleanAlbedo, const WindowImage& cleanNormal) {
   out.buffers["color"] = std::move(history);
+  out.accumulated = true;
   out.correlatedNoise = alone.steered;
   return withCleanedGuides(std::move(out), cleanAlbedo, cleanNormal);
 }

@@ -25,4 +25,8 @@ void checkDeviceAvailable(const torch::Device& device);
 // std::invalid_argument for another device.
 std::optional<double> freeDeviceMemory(const torch::Device& device);
 
+// Whether this CPU computes bfloat16 natively (AMX or AVX-512 BF16), where
+// oneDNN's bfloat16 convolutions are faster than its float ones.
+bool cpuComputesBFloat16();
+
 }  // namespace dn

@@ -33,6 +33,10 @@ OidnRunResult runOidnPrefiltered(const OidnBase& base, const FrameBuffers& frame
                                  const OidnRunOptions& options, bool splitLightPaths,
                                  FrameBuffers* clean = nullptr);
 
+// The base's inner convolutions in `precision` for the runs that follow
+// (OidnUNetImpl::useInnerPrecision); each caller of the networks sets its own.
+void useNetworkPrecision(const OidnBase& base, Precision precision);
+
 class OidnPipeline : public Pipeline {
  public:
   // `controlled` is null for a model without a Control Module.

@@ -81,6 +81,9 @@ struct FrameBuffers {
   // as the frame was without measuring again. Unknown: measured where a
   // Control Module could steer (ControlUse::Auto).
   std::optional<bool> correlatedNoise;
+  // The colour is a sequence's render accumulated over its window: the
+  // frame's second denoising (dn/temporal/sequence.h).
+  bool accumulated = false;
   // Buffers of the source left out of the first read, and how to read them
   // (dn/io/buffer_io.h sets both): a pipeline reads what only one of its paths
   // needs when it takes that path, e.g. the Control Module's extra buffers.

@@ -47,7 +47,8 @@ enum class ShareRule {
 };
 
 struct PassDenoiseOptions {
-  OidnRunOptions run;  // device, tiling and memory of every network run
+  OidnRunOptions run;                      // device, tiling and memory of every network run
+  Precision precision = Precision::Float;  // of every network run (DenoiseOptions::precision)
   LightPassGuide guide = LightPassGuide::Albedo;
   ColorPassDenoise colorPasses = ColorPassDenoise::AlbedoNetwork;
   ShareRule share = ShareRule::None;

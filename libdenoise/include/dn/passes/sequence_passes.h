@@ -39,7 +39,23 @@ struct SequencePassOptions {
   // production-scale tuning half, +0.07 dB a light pass on the moving shots
   // (the large network: +0.06).
   bool accumulated = true;
+  // The precision of that second denoising (secondDenoisingPrecision).
+  Precision accumulatedPrecision = Precision::Float;
 };
+
+// The precision of a sequence's second denoisings (its accumulated renders,
+// the beauty's and the light passes' alike, so that the residual closing
+// their sum holds no rounding of one that the other lacks) where the light
+// passes are filtered over time, for a run in `precision` on `device`:
+// bfloat16 where that is float, on a CPU that computes bfloat16 natively (AMX
+// or AVX-512 BF16), unless `precisionGiven` (one precision throughout, as
+// asked); else `precision`. The second denoising is at most
+// TemporalOptions::accumulatedShare of each result: on the production-scale
+// tuning shots bfloat16 moved the light passes by 0.03 dB at most and the
+// beauty by 0.07 dB at most, and cut the time of --passes on a sequence by a
+// tenth (docs/RESULTS.md).
+Precision secondDenoisingPrecision(Precision precision, const torch::Device& device,
+                                   bool precisionGiven);
 
 // A frame's passes (readLightPasses of the file's layout), each denoised
 // alone, the residual left out (the sum closes it), marked for filtering over
