@@ -205,14 +205,24 @@ TEST_CASE("jointly denoised passes recombine to the beauty, each as good as OIDN
   }
 }
 
+// The Blender 5 frame's light passes, as read, and the networks that denoise them.
+struct Blender5Passes {
+  OidnBase base = oidnBaseOfModel(kModel);
+  FrameBuffers frame = readFrame(kBlender5);
+  LightPassLayout layout = findLightPasses(channelNames(kBlender5), "ViewLayer.");
+  LightPassImages noisy = readLightPasses(kBlender5, layout, frame);
+
+  LightPassImages apart(const PassDenoiseOptions& options) const {
+    return denoisePassesApart(base, frame, layout, noisy, options);
+  }
+};
+
 TEST_CASE(
     "the residual closes the rule; shared, nothing moves when the parts add up, or into black") {
-  const OidnBase base = oidnBaseOfModel(kModel);
-  const FrameBuffers frame = readFrame(kBlender5);
-  const LightPassLayout layout = findLightPasses(channelNames(kBlender5), "ViewLayer.");
-  const LightPassImages noisy = readLightPasses(kBlender5, layout, frame);
+  const Blender5Passes b;
+  const auto& [base, frame, layout, noisy] = b;
   PassDenoiseOptions options;
-  const LightPassImages apart = denoisePassesApart(base, frame, layout, noisy, options);
+  const LightPassImages apart = b.apart(options);
   // The default: every pass as denoised alone; the residual closes the rule.
   const Image& beauty = frame.get("color");
   const DenoisedPasses byDefault = shareToBeauty(layout, noisy, apart, beauty, options);
@@ -247,20 +257,17 @@ TEST_CASE(
 }
 
 TEST_CASE("the passes run in their own precision, whatever the networks ran in before") {
-  const OidnBase base = oidnBaseOfModel(kModel);
-  const FrameBuffers frame = readFrame(kBlender5);
-  const LightPassLayout layout = findLightPasses(channelNames(kBlender5), "ViewLayer.");
-  const LightPassImages noisy = readLightPasses(kBlender5, layout, frame);
+  const Blender5Passes b;
   PassDenoiseOptions options;
-  const LightPassImages inFloat = denoisePassesApart(base, frame, layout, noisy, options);
-  useNetworkPrecision(base, Precision::BFloat16);  // as a sequence's second denoising leaves it
-  const LightPassImages again = denoisePassesApart(base, frame, layout, noisy, options);
+  const LightPassImages inFloat = b.apart(options);
+  useNetworkPrecision(b.base, Precision::BFloat16);  // as a sequence's second denoising leaves it
+  const LightPassImages again = b.apart(options);
   for (const auto& [key, image] : inFloat) {
     CAPTURE(key);
     CHECK(again.at(key).pixels == image.pixels);
   }
   options.precision = Precision::BFloat16;
-  const LightPassImages reduced = denoisePassesApart(base, frame, layout, noisy, options);
+  const LightPassImages reduced = b.apart(options);
   CHECK(reduced.at("diffuse_direct").pixels != inFloat.at("diffuse_direct").pixels);
 }
 

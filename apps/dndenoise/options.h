@@ -45,12 +45,13 @@ struct Options {
   bool passes = false;                                    // --passes
   PassesOverTime passesOverTime = PassesOverTime::Light;  // --passes-temporal
   bool passesTemporalGiven = false;
-  std::vector<GivenOption> given;  // options that act on some models only
-  bool wasGiven(const std::string& flag) const;
+  std::vector<GivenOption> given;           // options that act on some models only
   bool temporal = true;                     // --temporal on|filter; off: false
   dn::temporal::SequenceSettings sequence;  // --window, --motion, --temporal filter
   std::string temporalTrust = "rules";      // --temporal-trust learned|rules
   std::string temporalFilter = "auto";      // --temporal-filter auto|cpu|tensors
+
+  bool wasGiven(const std::string& flag) const;  // whether `given` has `flag`
 };
 
 // The options of the command line; -h, --version and --list-views print and exit.

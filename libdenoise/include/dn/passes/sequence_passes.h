@@ -2,8 +2,7 @@
 // motion vectors): each frame's passes denoised alone, as for one frame, then
 // filtered over the window with the beauty's weights (the same neighbours,
 // reprojection and per-pixel weights: dn::temporal::Sequence's companions),
-// the view-dependent passes (glossy, transmission) only where the surface
-// stood still on screen; each light pass's render accumulated with the same
+// Diffuse Color too; each light pass's render accumulated with the same
 // weights, denoised again, averaged with the past frames' and blended in, as
 // the beauty's is; and the residual set to the frame's denoised beauty minus
 // the rest, so the renderer's rule still holds exactly. The residual then
@@ -25,7 +24,7 @@ enum class PassesOverTime {
   // those of view-dependent light (Glossy Color) as denoised alone (the default,
   // measured: docs/RESULTS.md).
   Light,
-  All,  // the colour passes too
+  All,  // the colours of view-dependent light too
   Off,  // none: every pass as denoised alone, the residual takes the beauty's filtering
 };
 
@@ -52,8 +51,8 @@ struct SequencePassOptions {
 // asked); else `precision`. The second denoising is at most
 // TemporalOptions::accumulatedShare of each result: on the production-scale
 // tuning shots bfloat16 moved the light passes by 0.03 dB at most and the
-// beauty by 0.07 dB at most, and cut the time of --passes on a sequence by a
-// tenth (docs/RESULTS.md).
+// beauty by 0.07 dB at most, and took 0.93 of the time of --passes on a
+// sequence (docs/dndenoise.md, Light passes).
 Precision secondDenoisingPrecision(Precision precision, const torch::Device& device,
                                    bool precisionGiven);
 

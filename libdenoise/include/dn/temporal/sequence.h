@@ -59,8 +59,10 @@ struct SequenceSettings {
 struct Companion {
   Image image;           // the frame's size, any channel count
   bool overTime = true;  // false: kept as made
-  // Light that moves with the view (a glossy pass): its neighbours count only
-  // where the surface stood still (TemporalOptions::viewDependentMotion).
+  // Light that moves with the view (a glossy pass): it takes the colour's
+  // weights as they are (they fall with motion by the frame's view-dependent
+  // share), no light test of its own, and its own share alone of its second
+  // denoising (TemporalOptions::viewDependentShareAlone).
   bool viewDependent = false;
   // The image as rendered, where it is denoised again once accumulated as
   // the colour's render is (CompanionMaker::denoiseAccumulated); else empty.
