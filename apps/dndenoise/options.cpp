@@ -51,7 +51,9 @@ quality (the default model, models/default.dnm, and others over OIDN's networks)
   --precision float|bf16|fp16  the convolutions inside the networks in float
                       (default: OIDN's result), bfloat16 (faster on CPUs with AMX,
                       0.03 dB lower on average; docs/dndenoise.md, Speed and memory)
-                      or half (fp16, as OIDN's CUDA device: with --device cuda only)
+                      or half (fp16, as OIDN's CUDA device: with --device cuda only);
+                      not given, --passes on a sequence runs its second
+                      denoisings in bf16 where the CPU computes it natively
   --control auto|on|off  models with a Control Module (the default): steer the base
                       when it leaves correlated noise (auto, default), always, or never
   --sigmas LIST|none  models with a diffusion Control Module (the default): the

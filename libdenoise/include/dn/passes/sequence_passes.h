@@ -52,7 +52,7 @@ struct SequencePassOptions {
 // TemporalOptions::accumulatedShare of each result: on the production-scale
 // tuning shots bfloat16 moved the light passes by 0.03 dB at most and the
 // beauty by 0.07 dB at most, and took 0.93 of the time of --passes on a
-// sequence (docs/dndenoise.md, Light passes).
+// sequence (docs/dndenoise.md, Light passes on a sequence).
 Precision secondDenoisingPrecision(Precision precision, const torch::Device& device,
                                    bool precisionGiven);
 
